@@ -1,0 +1,5 @@
+//! # marionette-host
+//!
+//! The host half of Marionette: everything that builds and drives, never the
+//! per-frame logic itself (that lives in `marionette-core`, which this crate
+//! calls).
