@@ -21,4 +21,10 @@
 #![forbid(unsafe_code)]
 #![cfg_attr(test, allow(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used, clippy::panic))]
 
+pub mod body;
+pub mod clip;
+pub mod goal;
+pub mod grid;
 pub mod math;
+pub mod pose;
+pub mod solve;

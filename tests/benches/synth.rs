@@ -1,0 +1,2 @@
+//! (synth benches, in progress)
+fn main() {}

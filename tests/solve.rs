@@ -1,0 +1,1 @@
+//! (solve tests, in progress)
