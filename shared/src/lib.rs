@@ -27,4 +27,5 @@ pub mod goal;
 pub mod grid;
 pub mod math;
 pub mod pose;
+pub mod servo;
 pub mod solve;
