@@ -3,3 +3,5 @@
 //! The host half of Marionette: everything that builds and drives, never the
 //! per-frame logic itself (that lives in `marionette-core`, which this crate
 //! calls).
+
+pub mod import;
