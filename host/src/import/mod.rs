@@ -146,7 +146,7 @@ pub enum ImportError {
     Invalid {
         /// File name.
         file: String,
-        /// 1-based line.
+        /// 1-based line; 0 for a bad caller argument (scale, frame time).
         line: usize,
         /// What was being read.
         field: String,
@@ -182,7 +182,8 @@ impl ImportError {
         }
     }
 
-    /// The 1-based line the error is about, if it comes from reading text.
+    /// The 1-based line the error is about, if it comes from reading text
+    /// (0 for a bad caller argument such as a scale or frame time).
     #[must_use]
     pub fn line(&self) -> Option<usize> {
         match self {
