@@ -1,0 +1,217 @@
+//! The raw wire messages, exactly as postcard (de)serializes them.
+//!
+//! Variant order is the wire contract: postcard encodes an enum variant as
+//! its index. Append new variants at the end; never reorder. See the module
+//! documentation of [`crate::wire`] for the byte layout.
+
+use serde::{Deserialize, Serialize};
+
+use super::{ErrorCounters, List};
+
+/// Maximum sensors in one [`TrackerFrame`].
+pub const MAX_SENSORS: usize = 16;
+/// Maximum values in one [`Params`] message.
+pub const MAX_PARAMS: usize = 6;
+/// Maximum servo targets in one [`Telemetry`] message.
+pub const MAX_SERVOS: usize = 24;
+/// Maximum goal residuals in one [`Telemetry`] message (and goal indices).
+pub const MAX_GOALS: usize = 8;
+/// Pipeline stages reported in [`Telemetry::stage_counts`]:
+/// decode, map, synth, solve, servo, total.
+pub const STAGES: usize = 6;
+
+/// Every message, host to board (tags 0-3) and board to host (tags 4-6).
+///
+/// Variants differ a lot in size (a full `TrackerFrame` is ~470 bytes); with
+/// no heap they are stored inline on purpose.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Message {
+    /// Tag 0, host → board: version handshake.
+    Hello(Hello),
+    /// Tag 1, host → board: one tracker sample.
+    TrackerFrame(TrackerFrame),
+    /// Tag 2, host → board: dial and slider values.
+    Params(Params),
+    /// Tag 3, host → board: a command, answered by [`Ack`].
+    Command(Command),
+    /// Tag 4, board → host: state and counters (answers `Hello` and
+    /// `RequestStatus`).
+    Status(Status),
+    /// Tag 5, board → host: per-frame outputs and timings.
+    Telemetry(Telemetry),
+    /// Tag 6, board → host: a command's result.
+    Ack(Ack),
+}
+
+/// Which way a message travels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Direction {
+    /// From the host to the board.
+    HostToBoard,
+    /// From the board to the host.
+    BoardToHost,
+}
+
+impl Message {
+    /// The postcard tag (variant index) of this message.
+    #[must_use]
+    pub const fn tag(&self) -> u8 {
+        match self {
+            Self::Hello(_) => 0,
+            Self::TrackerFrame(_) => 1,
+            Self::Params(_) => 2,
+            Self::Command(_) => 3,
+            Self::Status(_) => 4,
+            Self::Telemetry(_) => 5,
+            Self::Ack(_) => 6,
+        }
+    }
+
+    /// Which way this message travels.
+    #[must_use]
+    pub const fn direction(&self) -> Direction {
+        match self {
+            Self::Hello(_) | Self::TrackerFrame(_) | Self::Params(_) | Self::Command(_) => {
+                Direction::HostToBoard
+            }
+            Self::Status(_) | Self::Telemetry(_) | Self::Ack(_) => Direction::BoardToHost,
+        }
+    }
+}
+
+/// Version handshake: the host's protocol version.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Hello {
+    /// The sender's [`super::PROTOCOL_VERSION`].
+    pub protocol_version: u16,
+}
+
+/// One tracker sensor's pose.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Sensor {
+    /// Sensor id, `< MAX_SENSORS`, unique within a frame.
+    pub id: u8,
+    /// Position in metres, world frame (Y up).
+    pub position: [f32; 3],
+    /// Orientation quaternion `[w, x, y, z]`, unit length.
+    pub rotation: [f32; 4],
+}
+
+/// One tracker sample: up to [`MAX_SENSORS`] sensors.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrackerFrame {
+    /// Host sequence number (shared by all host messages that carry one).
+    pub seq: u32,
+    /// Sample time in microseconds (wraps).
+    pub time_us: u32,
+    /// The sensors.
+    pub sensors: List<Sensor, MAX_SENSORS>,
+}
+
+/// Dial and slider values.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Params {
+    /// Host sequence number.
+    pub seq: u32,
+    /// Up to [`MAX_PARAMS`] values.
+    pub values: List<f32, MAX_PARAMS>,
+}
+
+/// A command from the host.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Command {
+    /// Host sequence number; echoed by [`Ack`].
+    pub seq: u32,
+    /// What to do.
+    pub kind: CommandKind,
+}
+
+/// What a [`Command`] asks for. Variant order is the wire contract.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum CommandKind {
+    /// Tag 0: enable the servo outputs.
+    Arm,
+    /// Tag 1: disable the servo outputs.
+    Disarm,
+    /// Tag 2: use motion table `n`.
+    SelectTable(u8),
+    /// Tag 3: use clip `n` of the current table.
+    SelectClip(u8),
+    /// Tag 4: set goal `goal`'s weight (0 disables the goal).
+    SetGoalWeight {
+        /// Goal index, `< MAX_GOALS`.
+        goal: u8,
+        /// Weight, finite, `0 ≤ weight ≤ WEIGHT_LIMIT`.
+        weight: f32,
+    },
+    /// Tag 5: take sensor `sensor`'s current pose as its reference.
+    Boresight {
+        /// Sensor id, `< MAX_SENSORS`.
+        sensor: u8,
+    },
+    /// Tag 6: answer with a [`Status`].
+    RequestStatus,
+}
+
+/// Why the board is (not) ready. Variant order is the wire contract.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum StatusReason {
+    /// Tag 0: ready.
+    #[default]
+    Ok,
+    /// Tag 1: no motion table in flash.
+    NoTable,
+    /// Tag 2: the table blob's magic is wrong.
+    BadMagic,
+    /// Tag 3: the table blob's format version is unsupported.
+    BadVersion,
+    /// Tag 4: the table blob's CRC does not match.
+    BadCrc,
+    /// Tag 5: the table blob's sizes or offsets are out of bounds.
+    BadBounds,
+    /// Tag 6: the host's `Hello` carried another protocol version.
+    ProtocolMismatch,
+}
+
+/// The board's state and counters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Status {
+    /// The board's [`super::PROTOCOL_VERSION`].
+    pub protocol_version: u16,
+    /// Outputs enabled.
+    pub armed: bool,
+    /// A valid table is loaded.
+    pub table_ok: bool,
+    /// Why not ready, or `Ok`.
+    pub reason: StatusReason,
+    /// Rejections so far.
+    pub errors: ErrorCounters,
+    /// Frames accepted so far.
+    pub frames_ok: u32,
+}
+
+/// Per-frame outputs and timings from the board.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Telemetry {
+    /// Board sequence number (its own counter).
+    pub seq: u32,
+    /// Servo targets in quarter-microseconds (Maestro units).
+    pub servo_targets: List<u16, MAX_SERVOS>,
+    /// Remaining distance to each goal, metres.
+    pub goal_residuals: List<f32, MAX_GOALS>,
+    /// Instruction counts or cycles per stage: decode, map, synth, solve,
+    /// servo, total.
+    pub stage_counts: [u32; STAGES],
+    /// Rejections so far.
+    pub errors: ErrorCounters,
+}
+
+/// A command's result.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Ack {
+    /// The command's sequence number.
+    pub seq: u32,
+    /// Whether it was carried out.
+    pub ok: bool,
+}

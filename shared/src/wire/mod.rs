@@ -1,0 +1,300 @@
+//! The serial wire protocol between the host and the board.
+//!
+//! # Specification (protocol version 1)
+//!
+//! ## Frames
+//!
+//! Every message travels in one frame:
+//!
+//! ```text
+//! frame = COBS( payload ++ crc32_le(payload) ) ++ 0x00
+//! payload = postcard(Message)
+//! ```
+//!
+//! - **payload**: the [`Message`] serialized by postcard 1.x (layout below).
+//! - **CRC**: CRC-32/ISO-HDLC ([`crate::crc`]: zlib/Ethernet, reflected
+//!   polynomial `0xEDB88320`, init and xorout `0xFFFFFFFF`) of the payload
+//!   bytes only, appended as 4 bytes **little-endian**.
+//! - **COBS** (Cheshire & Baker; [`cobs`]) of payload + CRC, so that the frame
+//!   contains no `0x00`, followed by one `0x00` delimiter.
+//! - A receiver treats every `0x00` as the end of a frame. A sender may send
+//!   extra `0x00` bytes at any time (e.g. one before the first frame) to
+//!   resynchronise; empty frames are ignored. Bytes received before the first
+//!   delimiter form a frame like any other and will normally fail the CRC.
+//! - Limits: payload ≤ [`MAX_PAYLOAD`] = 476 bytes, decoded frame (payload +
+//!   CRC) ≤ [`FRAME_CAPACITY`] = 480 bytes, encoded frame including the
+//!   delimiter ≤ [`MAX_FRAME`] = 483 bytes. A receiver counts a longer frame
+//!   as `oversize` and discards it.
+//! - A frame is rejected, and counted by kind in [`ErrorCounters`], when its
+//!   COBS is malformed (`cobs`), it is shorter than 4 bytes or its CRC differs
+//!   (`crc`), postcard cannot decode the payload or bytes remain after the
+//!   message (`decode`), or it is too long (`oversize`).
+//!
+//! ## postcard encoding of the field types
+//!
+//! | type | bytes |
+//! |---|---|
+//! | `u8` | 1 byte, as is |
+//! | `u16`, `u32` | unsigned LEB128 varint: 7 bits per byte, least significant group first, high bit set on every byte but the last (`0`→`00`, `127`→`7F`, `128`→`80 01`, `300`→`AC 02`, `1000`→`E8 07`, `u32::MAX`→`FF FF FF FF 0F`); at most 3 bytes for `u16`, 5 for `u32` |
+//! | `bool` | `00` false, `01` true; any other byte is a decode error |
+//! | `f32` | 4 bytes, IEEE-754 bits little-endian (`1.0`→`00 00 80 3F`) |
+//! | `[T; n]` | `n` elements, no length prefix |
+//! | [`List<T, N>`](List) | `varint(len)` then `len` elements; `len > N` is a decode error |
+//! | struct | fields in declaration order, no tags, no padding |
+//! | enum | `varint(variant index)` then the variant's fields |
+//!
+//! Encoders emit the shortest varint. Decoders (postcard) also accept
+//! over-long varints that fit the type; the CRC protects against corruption.
+//!
+//! ## Messages: the tags are the contract
+//!
+//! | tag | message | direction | fields, in order |
+//! |---|---|---|---|
+//! | 0 | [`Hello`] | host → board | `protocol_version: u16` |
+//! | 1 | [`TrackerFrame`] | host → board | `seq: u32, time_us: u32, sensors: List<Sensor, 16>` |
+//! | 2 | [`Params`] | host → board | `seq: u32, values: List<f32, 6>` |
+//! | 3 | [`Command`] | host → board | `seq: u32, kind: CommandKind` |
+//! | 4 | [`Status`] | board → host | `protocol_version: u16, armed: bool, table_ok: bool, reason: StatusReason, errors: ErrorCounters, frames_ok: u32` |
+//! | 5 | [`Telemetry`] | board → host | `seq: u32, servo_targets: List<u16, 24>, goal_residuals: List<f32, 8>, stage_counts: [u32; 6], errors: ErrorCounters` |
+//! | 6 | [`Ack`] | board → host | `seq: u32, ok: bool` |
+//!
+//! - [`Sensor`]: `id: u8, position: [f32; 3]` (metres), `rotation: [f32; 4]`
+//!   (`[w, x, y, z]`) — 29 bytes.
+//! - [`CommandKind`]: 0 `Arm`, 1 `Disarm`, 2 `SelectTable(u8)`,
+//!   3 `SelectClip(u8)`, 4 `SetGoalWeight { goal: u8, weight: f32 }`,
+//!   5 `Boresight { sensor: u8 }`, 6 `RequestStatus`.
+//! - [`StatusReason`]: 0 `Ok`, 1 `NoTable`, 2 `BadMagic`, 3 `BadVersion`
+//!   (table format), 4 `BadCrc`, 5 `BadBounds`, 6 `ProtocolMismatch`.
+//! - [`ErrorCounters`]: eight `u32` varints: `cobs, crc, decode, oversize,
+//!   version, lost, stale, range`.
+//! - `stage_counts`: decode, map, synth, solve, servo, total (instruction
+//!   counts on the emulator, cycles on hardware).
+//! - `servo_targets` are in quarter-microseconds (Maestro units).
+//!
+//! Largest payloads: `TrackerFrame` with 16 sensors and 5-byte varints
+//! 1 + 5 + 5 + 1 + 16 × 29 = 476 bytes; `Telemetry` 182; `Status` 52.
+//!
+//! ## Sequence numbers
+//!
+//! The host keeps **one** `u32` counter for `TrackerFrame`, `Params` and
+//! `Command`, incremented by one per message sent (wrapping), starting
+//! anywhere (normally 0) after a `Hello`. The board checks it with
+//! [`SeqTracker`]: a gap of `d` counts `d − 1` as `lost`; a duplicate or an
+//! older number (up to [`STALE_WINDOW`] behind) is rejected as `stale`; an
+//! accepted `Hello` restarts tracking. `Telemetry.seq` is the board's own
+//! counter; `Ack.seq` echoes the command's.
+//!
+//! ## Validation (board side)
+//!
+//! Decoding yields raw values; `validate()` turns host messages into
+//! [`ValidTrackerFrame`], [`ValidParams`], [`ValidCommand`] or counts a
+//! `range` rejection:
+//! - sensor ids `< 16` and unique; `|position| ≤ 100 m` (NaN/inf rejected);
+//!   quaternion with `| |q|² − 1 | ≤ 0.1` is renormalised, otherwise rejected;
+//! - params finite with `|v| ≤ 1e6`;
+//! - `SetGoalWeight`: goal `< 8`, `0 ≤ weight ≤ 1e6`; `Boresight`: sensor `< 16`.
+//!
+//! ## Versioning
+//!
+//! [`PROTOCOL_VERSION`] is 1. The host opens a session with `Hello`; the board
+//! answers with a `Status` carrying its own version. On a mismatch the board
+//! counts a `version` error, reports `reason = ProtocolMismatch`, and rejects
+//! every other message (counted as `version`) until a matching `Hello`. Before
+//! any `Hello` the board accepts messages. Any change to an existing
+//! message's layout, or to a tag, bumps the version; new messages and new
+//! enum variants are appended at the end (a new variant also bumps the
+//! version, since an old decoder rejects it). Decoding is strict: trailing
+//! bytes after the message are a decode error.
+//!
+//! ## Worked example
+//!
+//! `Hello { protocol_version: 1 }`:
+//!
+//! ```text
+//! payload           00 01                  tag 0, varint 1
+//! crc32(payload)    0x36DE2269  -> LE      69 22 DE 36
+//! payload ++ crc    00 01 69 22 DE 36
+//! COBS              01 | 06 01 69 22 DE 36  (block "" + zero, block of 5)
+//! frame             01 06 01 69 22 DE 36 00
+//! ```
+//!
+//! `Ack { seq: 300, ok: true }`: payload `06 AC 02 01`, CRC `0x917C76D0`,
+//! frame `09 06 AC 02 01 D0 76 7C 91 00`.
+//!
+//! `Command { seq: 5, kind: Arm }`: payload `03 05 00`, CRC `0x8070930E`,
+//! frame `03 03 05 05 0E 93 70 80 00`.
+//!
+//! `TrackerFrame { seq: 1, time_us: 1000, sensors: [Sensor { id: 0,
+//! position: [0.0, 1.5, -0.25], rotation: [1, 0, 0, 0] }] }`:
+//!
+//! ```text
+//! payload  01 01 E8 07 01 00  00 00 00 00  00 00 C0 3F  00 00 80 BE
+//!          00 00 80 3F  00 00 00 00  00 00 00 00  00 00 00 00
+//! crc      0xDB0F8228 -> 28 82 0F DB
+//! frame    06 01 01 E8 07 01 01 01 01 01 01 01 03 C0 3F 01 03 80 BE 01
+//!          03 80 3F 01 01 01 01 01 01 01 01 01 01 01 05 28 82 0F DB 00
+//! ```
+//!
+//! # Use
+//!
+//! - Sender: [`encode`] a [`Message`] into a buffer of [`MAX_FRAME`] bytes and
+//!   write the returned slice.
+//! - Board receiver: [`Receiver`] (bytes in, validated [`Incoming`] out, all
+//!   counters kept), or the pieces: [`FrameReader`] → [`decode_frame`] →
+//!   [`SeqTracker`] → `validate()`.
+//!
+//! Nothing here allocates or panics.
+
+pub mod cobs;
+mod error;
+mod list;
+mod message;
+mod reader;
+mod receiver;
+mod seq;
+mod validate;
+
+pub use error::{ErrorCounters, WireError};
+pub use list::List;
+pub use message::{
+    Ack, Command, CommandKind, Direction, Hello, MAX_GOALS, MAX_PARAMS, MAX_SENSORS, MAX_SERVOS,
+    Message, Params, STAGES, Sensor, Status, StatusReason, Telemetry, TrackerFrame,
+};
+pub use reader::FrameReader;
+pub use receiver::{Incoming, Receiver, Session};
+pub use seq::{STALE_WINDOW, SeqTracker};
+pub use validate::{
+    PARAM_LIMIT, POSITION_LIMIT_M, QUAT_NORM2_TOLERANCE, SensorSample, ValidCommand, ValidParams,
+    ValidTrackerFrame, WEIGHT_LIMIT,
+};
+
+use crate::crc::{Crc32, crc32};
+use postcard::ser_flavors::Flavor;
+
+/// The protocol version this crate speaks.
+pub const PROTOCOL_VERSION: u16 = 1;
+/// Bytes of CRC after the payload.
+pub const CRC_LEN: usize = 4;
+/// Largest postcard payload of any [`Message`] (a full `TrackerFrame`).
+pub const MAX_PAYLOAD: usize = 1 + 5 + 5 + 1 + MAX_SENSORS * 29;
+/// Largest decoded frame (payload + CRC): the [`FrameReader`] buffer size.
+pub const FRAME_CAPACITY: usize = MAX_PAYLOAD + CRC_LEN;
+/// Largest encoded frame, including the `0x00` delimiter.
+pub const MAX_FRAME: usize = cobs::max_encoded_len(FRAME_CAPACITY) + 1;
+
+/// postcard flavor that COBS-encodes and checksums on the fly, then appends
+/// the CRC and the delimiter.
+struct FrameFlavor<'a> {
+    cobs: cobs::Encoder<'a>,
+    crc: Crc32,
+}
+
+const FULL: postcard::Error = postcard::Error::SerializeBufferFull;
+
+impl Flavor for FrameFlavor<'_> {
+    type Output = usize;
+
+    fn try_extend(&mut self, data: &[u8]) -> postcard::Result<()> {
+        self.crc.update(data);
+        self.cobs.push_slice(data).map_err(|_| FULL)
+    }
+
+    fn try_push(&mut self, data: u8) -> postcard::Result<()> {
+        self.try_extend(&[data])
+    }
+
+    fn finalize(mut self) -> postcard::Result<usize> {
+        let crc = self.crc.finish().to_le_bytes();
+        self.cobs.push_slice(&crc).map_err(|_| FULL)?;
+        self.cobs.finish_frame().map_err(|_| FULL)
+    }
+}
+
+/// Encodes `msg` as a complete frame (COBS, CRC, delimiter) into `out` and
+/// returns the bytes to send.
+///
+/// # Errors
+/// [`WireError::BufferFull`] if `out` is too small ([`MAX_FRAME`] always
+/// suffices).
+pub fn encode<'a>(msg: &Message, out: &'a mut [u8]) -> Result<&'a [u8], WireError> {
+    let flavor = FrameFlavor {
+        cobs: cobs::Encoder::new(&mut *out),
+        crc: Crc32::new(),
+    };
+    let n = postcard::serialize_with_flavor(msg, flavor).map_err(|_| WireError::BufferFull)?;
+    out.get(..n).ok_or(WireError::BufferFull)
+}
+
+/// Serializes `msg` to its bare postcard payload (no CRC, no COBS).
+///
+/// # Errors
+/// [`WireError::BufferFull`] if `out` is too small.
+pub fn encode_payload<'a>(msg: &Message, out: &'a mut [u8]) -> Result<&'a [u8], WireError> {
+    match postcard::to_slice(msg, out) {
+        Ok(used) => Ok(used),
+        Err(_) => Err(WireError::BufferFull),
+    }
+}
+
+/// Decodes a bare postcard payload; every byte must be used.
+///
+/// # Errors
+/// [`WireError::Decode`] if postcard fails or bytes remain.
+pub fn decode_payload(payload: &[u8]) -> Result<Message, WireError> {
+    match postcard::take_from_bytes::<Message>(payload) {
+        Ok((msg, [])) => Ok(msg),
+        _ => Err(WireError::Decode),
+    }
+}
+
+/// Checks the CRC of a decoded frame (as yielded by [`FrameReader`]: payload
+/// + 4 CRC bytes, no COBS, no delimiter) and decodes its payload.
+///
+/// # Errors
+/// [`WireError::Crc`] if the frame is under 4 bytes or the CRC differs;
+/// [`WireError::Decode`] as for [`decode_payload`].
+pub fn decode_frame(frame: &[u8]) -> Result<Message, WireError> {
+    let split = frame.len().checked_sub(CRC_LEN).ok_or(WireError::Crc)?;
+    let (payload, crc) = frame.split_at_checked(split).ok_or(WireError::Crc)?;
+    let crc: [u8; CRC_LEN] = crc.try_into().map_err(|_| WireError::Crc)?;
+    if u32::from_le_bytes(crc) != crc32(payload) {
+        return Err(WireError::Crc);
+    }
+    decode_payload(payload)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hello_frame_exact() {
+        let mut out = [0u8; MAX_FRAME];
+        let msg = Message::Hello(Hello {
+            protocol_version: 1,
+        });
+        let frame = encode(&msg, &mut out).unwrap();
+        assert_eq!(frame, &[0x01, 0x06, 0x01, 0x69, 0x22, 0xDE, 0x36, 0x00]);
+        assert_eq!(decode_frame(&[0x00, 0x01, 0x69, 0x22, 0xDE, 0x36]), Ok(msg));
+        assert_eq!(
+            decode_frame(&[0x00, 0x01, 0x69, 0x22, 0xDE, 0x37]),
+            Err(WireError::Crc)
+        );
+        assert_eq!(decode_frame(&[0x69, 0x22, 0xDE]), Err(WireError::Crc));
+    }
+
+    #[test]
+    fn trailing_bytes_are_a_decode_error() {
+        // A valid Hello followed by one extra byte; an unknown tag; nothing.
+        assert_eq!(decode_payload(&[0x00, 0x01, 0xFF]), Err(WireError::Decode));
+        assert_eq!(decode_payload(&[0x07]), Err(WireError::Decode));
+        assert_eq!(decode_payload(&[]), Err(WireError::Decode));
+    }
+
+    #[test]
+    fn small_buffer_is_buffer_full() {
+        let msg = Message::Ack(Ack { seq: 1, ok: true });
+        let mut out = [0u8; 6];
+        assert_eq!(encode(&msg, &mut out), Err(WireError::BufferFull));
+    }
+}

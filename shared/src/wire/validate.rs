@@ -1,0 +1,279 @@
+//! Validated representations of the host-to-board messages.
+//!
+//! Decoding yields raw [`Message`](super::Message)s whose numbers may be NaN,
+//! infinite or absurd. `validate()` turns a raw message into a typed value
+//! whose invariants hold by construction (private fields, getters only), or
+//! rejects it with [`WireError::Range`].
+
+use glam::{Quat, Vec3};
+
+use super::message::{Command, CommandKind, MAX_GOALS, MAX_PARAMS, MAX_SENSORS, Params};
+use super::message::{Sensor, TrackerFrame};
+use super::{List, WireError};
+use crate::math;
+
+/// Largest accepted sensor distance from the origin, metres.
+pub const POSITION_LIMIT_M: f32 = 100.0;
+/// Largest accepted `| |q|² − 1 |` for a sensor quaternion; within it the
+/// quaternion is renormalised, beyond it the frame is rejected
+/// (`|q|` between about 0.95 and 1.05).
+pub const QUAT_NORM2_TOLERANCE: f32 = 0.1;
+/// Largest accepted `|value|` of a parameter.
+pub const PARAM_LIMIT: f32 = 1.0e6;
+/// Largest accepted goal weight.
+pub const WEIGHT_LIMIT: f32 = 1.0e6;
+
+/// `|x| ≤ limit`, false for NaN.
+#[inline]
+fn within(x: f32, limit: f32) -> bool {
+    math::abs(x) <= limit
+}
+
+/// A validated sensor: finite position within [`POSITION_LIMIT_M`], unit
+/// rotation, id `< MAX_SENSORS`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SensorSample {
+    id: u8,
+    position: Vec3,
+    rotation: Quat,
+}
+
+impl SensorSample {
+    /// Sensor id, `< MAX_SENSORS`.
+    #[must_use]
+    pub const fn id(&self) -> u8 {
+        self.id
+    }
+    /// Position, metres.
+    #[must_use]
+    pub const fn position(&self) -> Vec3 {
+        self.position
+    }
+    /// Orientation, unit length (renormalised with [`math::normalize_quat`]).
+    #[must_use]
+    pub const fn rotation(&self) -> Quat {
+        self.rotation
+    }
+}
+
+impl Sensor {
+    /// Checks one sensor.
+    ///
+    /// # Errors
+    /// [`WireError::Range`] for id `≥ MAX_SENSORS`, a non-finite or too-far
+    /// position, or a non-finite or far-from-unit quaternion.
+    pub fn validate(&self) -> Result<SensorSample, WireError> {
+        if usize::from(self.id) >= MAX_SENSORS {
+            return Err(WireError::Range);
+        }
+        let [px, py, pz] = self.position;
+        let p2 = px * px + py * py + pz * pz;
+        // False for NaN, and for infinity (also from overflowing squares).
+        if !(0.0..=POSITION_LIMIT_M * POSITION_LIMIT_M).contains(&p2) {
+            return Err(WireError::Range);
+        }
+        let [w, x, y, z] = self.rotation;
+        let q2 = w * w + x * x + y * y + z * z;
+        if !within(q2 - 1.0, QUAT_NORM2_TOLERANCE) {
+            return Err(WireError::Range);
+        }
+        Ok(SensorSample {
+            id: self.id,
+            position: Vec3::new(px, py, pz),
+            rotation: math::normalize_quat(Quat::from_xyzw(x, y, z, w)),
+        })
+    }
+}
+
+/// A validated tracker frame: every sensor valid, ids unique.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ValidTrackerFrame {
+    seq: u32,
+    time_us: u32,
+    sensors: List<SensorSample, MAX_SENSORS>,
+}
+
+impl ValidTrackerFrame {
+    /// Sequence number.
+    #[must_use]
+    pub const fn seq(&self) -> u32 {
+        self.seq
+    }
+    /// Sample time, microseconds.
+    #[must_use]
+    pub const fn time_us(&self) -> u32 {
+        self.time_us
+    }
+    /// The sensors, in wire order.
+    #[must_use]
+    pub fn sensors(&self) -> &[SensorSample] {
+        self.sensors.as_slice()
+    }
+    /// The sensor with id `id`, if present.
+    #[must_use]
+    pub fn sensor(&self, id: u8) -> Option<&SensorSample> {
+        self.sensors().iter().find(|s| s.id == id)
+    }
+}
+
+impl TrackerFrame {
+    /// Checks every sensor and that no id repeats.
+    ///
+    /// # Errors
+    /// [`WireError::Range`] on the first invalid sensor or repeated id.
+    pub fn validate(&self) -> Result<ValidTrackerFrame, WireError> {
+        let mut seen: u32 = 0;
+        let mut sensors = List::new();
+        for s in &self.sensors {
+            let v = s.validate()?;
+            // id < MAX_SENSORS = 16 was checked, so the shift is in range.
+            let bit = 1u32 << (u32::from(v.id) & 31);
+            if seen & bit != 0 {
+                return Err(WireError::Range);
+            }
+            seen |= bit;
+            sensors.push(v).map_err(|_| WireError::Range)?;
+        }
+        Ok(ValidTrackerFrame {
+            seq: self.seq,
+            time_us: self.time_us,
+            sensors,
+        })
+    }
+}
+
+/// Validated parameters: every value finite and within [`PARAM_LIMIT`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ValidParams {
+    seq: u32,
+    values: List<f32, MAX_PARAMS>,
+}
+
+impl ValidParams {
+    /// Sequence number.
+    #[must_use]
+    pub const fn seq(&self) -> u32 {
+        self.seq
+    }
+    /// The values (at most [`MAX_PARAMS`]).
+    #[must_use]
+    pub fn values(&self) -> &[f32] {
+        self.values.as_slice()
+    }
+}
+
+impl Params {
+    /// Checks every value.
+    ///
+    /// # Errors
+    /// [`WireError::Range`] for a NaN, infinite or too large value.
+    pub fn validate(&self) -> Result<ValidParams, WireError> {
+        if self.values.iter().all(|&v| within(v, PARAM_LIMIT)) {
+            Ok(ValidParams {
+                seq: self.seq,
+                values: self.values,
+            })
+        } else {
+            Err(WireError::Range)
+        }
+    }
+}
+
+/// A validated command: indices in range, weight finite and non-negative.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ValidCommand {
+    seq: u32,
+    kind: CommandKind,
+}
+
+impl ValidCommand {
+    /// Sequence number (echo it in the `Ack`).
+    #[must_use]
+    pub const fn seq(&self) -> u32 {
+        self.seq
+    }
+    /// What to do; its invariants hold (see [`Command::validate`]).
+    #[must_use]
+    pub const fn kind(&self) -> CommandKind {
+        self.kind
+    }
+}
+
+impl Command {
+    /// Checks `SetGoalWeight` (goal `< MAX_GOALS`, `0 ≤ weight ≤
+    /// WEIGHT_LIMIT`) and `Boresight` (sensor `< MAX_SENSORS`). Table and
+    /// clip numbers are checked by whoever owns the tables.
+    ///
+    /// # Errors
+    /// [`WireError::Range`] when a check fails.
+    pub fn validate(&self) -> Result<ValidCommand, WireError> {
+        let ok = match self.kind {
+            CommandKind::SetGoalWeight { goal, weight } => {
+                usize::from(goal) < MAX_GOALS && (0.0..=WEIGHT_LIMIT).contains(&weight)
+            }
+            CommandKind::Boresight { sensor } => usize::from(sensor) < MAX_SENSORS,
+            CommandKind::Arm
+            | CommandKind::Disarm
+            | CommandKind::SelectTable(_)
+            | CommandKind::SelectClip(_)
+            | CommandKind::RequestStatus => true,
+        };
+        if ok {
+            Ok(ValidCommand {
+                seq: self.seq,
+                kind: self.kind,
+            })
+        } else {
+            Err(WireError::Range)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sensor(id: u8, p: [f32; 3], q: [f32; 4]) -> Sensor {
+        Sensor {
+            id,
+            position: p,
+            rotation: q,
+        }
+    }
+
+    const ID: [f32; 4] = [1.0, 0.0, 0.0, 0.0];
+
+    #[test]
+    fn sensor_checks() {
+        assert!(sensor(15, [99.0, 0.0, 0.0], ID).validate().is_ok());
+        assert!(sensor(16, [0.0; 3], ID).validate().is_err());
+        assert!(sensor(0, [0.0, 100.1, 0.0], ID).validate().is_err());
+        assert!(sensor(0, [60.0, 60.0, 60.0], ID).validate().is_err());
+        assert!(sensor(0, [f32::NAN, 0.0, 0.0], ID).validate().is_err());
+        assert!(sensor(0, [f32::INFINITY, 0.0, 0.0], ID).validate().is_err());
+        assert!(sensor(0, [1e30, 0.0, 0.0], ID).validate().is_err());
+        assert!(
+            sensor(0, [0.0; 3], [f32::NAN, 0.0, 0.0, 0.0])
+                .validate()
+                .is_err()
+        );
+        assert!(sensor(0, [0.0; 3], [0.0; 4]).validate().is_err());
+        assert!(
+            sensor(0, [0.0; 3], [2.0, 0.0, 0.0, 0.0])
+                .validate()
+                .is_err()
+        );
+    }
+
+    #[test]
+    fn near_unit_quaternion_is_renormalised() {
+        // [w,x,y,z] = [1.02, 0, 0, 0] → identity; wire order w first.
+        let s = sensor(3, [1.0, 2.0, 3.0], [0.0, 0.0, 1.02, 0.0])
+            .validate()
+            .unwrap();
+        let r = s.rotation();
+        assert!((r.y - 1.0).abs() < 1e-6 && r.x == 0.0 && r.z == 0.0 && r.w == 0.0);
+        assert_eq!(s.position(), Vec3::new(1.0, 2.0, 3.0));
+        assert_eq!(s.id(), 3);
+    }
+}
