@@ -1,0 +1,261 @@
+//! The real board: STM32F411CEU6 "Black Pill" (Cortex-M4F at 100 MHz, 25 MHz
+//! crystal, 512 KB flash, 128 KB RAM), probe-rs chip `STM32F411CEUx`.
+//!
+//! | link | peripheral | pins (AF7) | rate |
+//! |---|---|---|---|
+//! | tracker | USART1 (APB2, 100 MHz) | PA9 TX, PA10 RX | 921 600 bit/s (−0.45 %) |
+//! | servo bus (Pololu Maestro) | USART2 (APB1, 50 MHz) | PA2 TX, PA3 RX | 115 200 bit/s (+0.01 %) |
+//!
+//! Everything is programmed through the PAC with compile-time constants
+//! ([`clock`], [`uart`], [`watchdog`]): the HAL's clock and serial set-up keep
+//! panicking branches that `panic-never` rejects in release builds. Logging is
+//! defmt over RTT through this crate's own panic-free logger ([`rtt`]).
+//!
+//! The independent watchdog resets the chip if the loop stops feeding it for
+//! about 100 ms (it is frozen while a debugger halts the core); a Pololu
+//! Maestro holds its last targets meanwhile (unless its own serial timeout is
+//! set). Time comes from the DWT cycle counter.
+
+pub mod clock;
+pub mod rtt;
+pub mod uart;
+pub mod watchdog;
+
+use super::{Board, Outcome};
+use cortex_m::peripheral::DWT;
+use stm32f4::stm32f411 as pac;
+use uart::{Uart, divisor, divisor_error_permille};
+use watchdog::Watchdog;
+
+pub use clock::SYSCLK_HZ;
+pub use watchdog::TIMEOUT_MS as WATCHDOG_MS;
+
+/// Tracker link rate, bit/s.
+pub const TRACKER_BAUD: u32 = 921_600;
+/// Servo bus rate, bit/s (the Maestro detects it from the first byte).
+pub const SERVO_BAUD: u32 = 115_200;
+
+const TRACKER_BRR: u16 = divisor(clock::PCLK2_HZ, TRACKER_BAUD);
+const SERVO_BRR: u16 = divisor(clock::PCLK1_HZ, SERVO_BAUD);
+// Both ends of a UART link tolerate a few percent in total; keep ours under 1 %.
+const _: () = assert!(divisor_error_permille(clock::PCLK2_HZ, TRACKER_BAUD, TRACKER_BRR) < 10);
+const _: () = assert!(divisor_error_permille(clock::PCLK1_HZ, SERVO_BAUD, SERVO_BRR) < 10);
+// 16× oversampling needs USARTDIV >= 1.
+const _: () = assert!(TRACKER_BRR >= 16 && SERVO_BRR >= 16);
+
+/// DWT cycles per microsecond.
+const CYCLES_PER_US: u32 = SYSCLK_HZ / 1_000_000;
+const _: () = assert!(SYSCLK_HZ.is_multiple_of(1_000_000));
+
+/// Why the board could not start.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum InitError {
+    /// The peripherals were already taken.
+    Taken,
+    /// The 25 MHz crystal did not start.
+    Crystal,
+    /// Flash did not accept the wait states for 100 MHz.
+    FlashLatency,
+    /// The PLL did not lock.
+    Pll,
+    /// The regulator did not reach scale 1.
+    Regulator,
+    /// SYSCLK did not switch to the PLL.
+    Switch,
+}
+
+/// What caused the last reset, from the RCC reset flags (most specific first).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum ResetCause {
+    /// The independent watchdog fired: the loop stalled.
+    Watchdog,
+    /// The window watchdog fired.
+    WindowWatchdog,
+    /// Software reset (a debugger's reset usually shows up here).
+    Software,
+    /// Low-power management reset.
+    LowPower,
+    /// Power-on (or power-down) reset.
+    PowerOn,
+    /// Brown-out: the supply dipped.
+    BrownOut,
+    /// The NRST pin.
+    Pin,
+    /// No flag was set.
+    Unknown,
+}
+
+impl ResetCause {
+    /// Reads the reset flags, then clears them for the next reset.
+    fn take(rcc: &pac::RCC) -> Self {
+        let csr = rcc.csr().read();
+        let cause = if csr.wdgrstf().is_reset() {
+            Self::Watchdog
+        } else if csr.wwdgrstf().is_reset() {
+            Self::WindowWatchdog
+        } else if csr.sftrstf().is_reset() {
+            Self::Software
+        } else if csr.lpwrrstf().is_reset() {
+            Self::LowPower
+        } else if csr.porrstf().is_reset() {
+            Self::PowerOn
+        } else if csr.borrstf().is_reset() {
+            Self::BrownOut
+        } else if csr.padrstf().is_reset() {
+            Self::Pin
+        } else {
+            Self::Unknown
+        };
+        rcc.csr().modify(|_, w| w.rmvf().clear());
+        cause
+    }
+}
+
+/// Microseconds from the DWT cycle counter, which wraps every 43 s at
+/// 100 MHz. Each update folds the cycles since the previous one into a
+/// microsecond count and a sub-microsecond remainder, so the count stays
+/// exact as long as updates come at least once per wrap (the watchdog feed
+/// does one).
+struct Micros {
+    last: u32,
+    us: u32,
+    rem: u32,
+}
+
+impl Micros {
+    fn start() -> Self {
+        Self {
+            last: DWT::cycle_count(),
+            us: 0,
+            rem: 0,
+        }
+    }
+
+    fn update(&mut self) -> u32 {
+        let now = DWT::cycle_count();
+        let delta = now.wrapping_sub(self.last);
+        self.last = now;
+        // rem < CYCLES_PER_US before and after, so the sum cannot overflow.
+        let rem = self.rem + delta % CYCLES_PER_US;
+        self.us = self
+            .us
+            .wrapping_add(delta / CYCLES_PER_US + rem / CYCLES_PER_US);
+        self.rem = rem % CYCLES_PER_US;
+        self.us
+    }
+}
+
+/// Routes PA2/PA3 (USART2) and PA9/PA10 (USART1) to alternate function 7,
+/// with pull-ups on the receive pins so an unplugged link idles high.
+fn route_pins(gpioa: &pac::GPIOA) {
+    gpioa.afrl().modify(|_, w| w.afrl2().af7().afrl3().af7());
+    gpioa.afrh().modify(|_, w| w.afrh9().af7().afrh10().af7());
+    gpioa
+        .pupdr()
+        .modify(|_, w| w.pupdr3().pull_up().pupdr10().pull_up());
+    gpioa
+        .ospeedr()
+        .modify(|_, w| w.ospeedr2().medium_speed().ospeedr9().medium_speed());
+    gpioa.moder().modify(|_, w| {
+        w.moder2().alternate().moder3().alternate();
+        w.moder9().alternate().moder10().alternate()
+    });
+}
+
+/// The Black Pill board.
+pub struct BlackPill {
+    tracker: Uart<pac::USART1>,
+    servo: Uart<pac::USART2>,
+    watchdog: Watchdog,
+    micros: Micros,
+    reset_cause: ResetCause,
+}
+
+impl BlackPill {
+    /// Clocks the chip at 100 MHz from the 25 MHz crystal, opens both links
+    /// and starts the watchdog (last, so that a failed start-up parks
+    /// instead of resetting in a loop).
+    pub fn init() -> Result<Self, InitError> {
+        let mut cp = cortex_m::Peripherals::take().ok_or(InitError::Taken)?;
+        let dp = pac::Peripherals::take().ok_or(InitError::Taken)?;
+        let reset_cause = ResetCause::take(&dp.RCC);
+        clock::setup(&dp.RCC, &dp.FLASH, &dp.PWR)?;
+
+        cp.DCB.enable_trace();
+        cp.DWT.enable_cycle_counter();
+
+        dp.RCC.ahb1enr().modify(|_, w| w.gpioaen().enabled());
+        dp.RCC.apb1enr().modify(|_, w| w.usart2en().enabled());
+        dp.RCC.apb2enr().modify(|_, w| w.usart1en().enabled());
+        // Read back: a peripheral's registers need two bus cycles after its clock is enabled.
+        let _ = dp.RCC.apb2enr().read();
+        route_pins(&dp.GPIOA);
+        let tracker = Uart::new(dp.USART1, TRACKER_BRR);
+        let servo = Uart::new(dp.USART2, SERVO_BRR);
+
+        // Keep the watchdog from resetting the chip while a debugger halts it.
+        dp.DBGMCU
+            .apb1_fz()
+            .modify(|_, w| w.dbg_iwdg_stop().set_bit());
+        let watchdog = Watchdog::start(dp.IWDG);
+        Ok(Self {
+            tracker,
+            servo,
+            watchdog,
+            micros: Micros::start(),
+            reset_cause,
+        })
+    }
+
+    /// What caused the reset before this start.
+    #[must_use]
+    pub const fn reset_cause(&self) -> ResetCause {
+        self.reset_cause
+    }
+
+    /// Whether the watchdog runs with its nominal period (see
+    /// [`Watchdog::is_configured`]).
+    #[must_use]
+    pub const fn watchdog_configured(&self) -> bool {
+        self.watchdog.is_configured()
+    }
+}
+
+impl Board for BlackPill {
+    type Tracker = Uart<pac::USART1>;
+    type ServoBus = Uart<pac::USART2>;
+
+    fn links(&mut self) -> (&mut Self::Tracker, &mut Self::ServoBus) {
+        (&mut self.tracker, &mut self.servo)
+    }
+
+    fn tables(&self) -> &'static [u8] {
+        crate::region::tables()
+    }
+
+    fn now_us(&mut self) -> u32 {
+        self.micros.update()
+    }
+
+    fn feed_watchdog(&mut self) {
+        self.watchdog.feed();
+        // The loop feeds far more often than the 43 s counter wrap.
+        self.micros.update();
+    }
+
+    fn finish(&mut self, outcome: Outcome) -> ! {
+        let _ = embedded_io::Write::flush(&mut self.servo);
+        defmt::warn!(
+            "session ended: status {}, {} log frames dropped",
+            outcome.exit_status(),
+            rtt::dropped_frames()
+        );
+        // The servos hold their last command. Keep feeding the watchdog: the
+        // board is idle, not stuck. (No interrupt is enabled, so `wfi` would
+        // never wake up to feed it.)
+        loop {
+            self.feed_watchdog();
+            cortex_m::asm::delay(SYSCLK_HZ / 1000);
+        }
+    }
+}
