@@ -412,25 +412,28 @@ fn cobs_long_vectors() {
 #[test]
 fn cobs_encoded_output_never_contains_zero() {
     let mut x: u32 = 99;
-    for len in 0..700 {
+    let mut longest_run = 0;
+    for len in 0..700u32 {
         let raw: Vec<u8> = (0..len)
             .map(|_| {
                 x = x.wrapping_mul(1_103_515_245).wrapping_add(12345);
-                // Plenty of zeros and of long non-zero runs.
-                if (x >> 16).is_multiple_of(5) {
+                // Short inputs are zero-rich; long ones have runs past 254.
+                if (x >> 16).is_multiple_of(len % 300 + 2) {
                     0
                 } else {
                     (x >> 24) as u8 | 1
                 }
             })
             .collect();
-        let mut out = vec![0u8; cobs::max_encoded_len(len)];
+        let mut out = vec![0u8; cobs::max_encoded_len(len as usize)];
         let n = cobs::encode(&raw, &mut out).unwrap();
         assert!(out[..n].iter().all(|&b| b != 0));
-        let mut back = vec![0u8; len.max(1)];
+        longest_run = longest_run.max(raw.split(|&b| b == 0).map(<[u8]>::len).max().unwrap_or(0));
+        let mut back = vec![0u8; (len as usize).max(1)];
         let m = cobs::decode(&out[..n], &mut back).unwrap();
         assert_eq!(&back[..m], &raw[..]);
     }
+    assert!(longest_run > 2 * 254, "inputs exercise full blocks");
 }
 
 // ------------------------------------------------------------ receive path
