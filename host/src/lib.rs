@@ -4,4 +4,5 @@
 //! per-frame logic itself (that lives in `marionette-core`, which this crate
 //! calls).
 
+pub mod blob;
 pub mod import;

@@ -1,0 +1,616 @@
+//! The flash-resident table blob: format, quantization and the in-place reader.
+//!
+//! A *table* is a regular grid of poses in parameter space (Wiley & Hahn's
+//! static synthesis), or a set of clips on such a grid (motion synthesis). The
+//! host builds it (`marionette-host`'s `blob` module is the one writer), the
+//! firmware maps the blob from flash and reads it **in place** with
+//! [`Table::parse`]: the header is decoded once (borrowing the names from the
+//! blob), the sample arrays are never copied, and each
+//! [`Table::sample`] decodes one 12-byte segment sample on demand.
+//!
+//! # Blob layout
+//!
+//! All integers outside the header are little-endian. Offsets are from the
+//! first byte of the blob.
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 4 | magic `"MRNT"` (`4D 52 4E 54`) |
+//! | 4 | 2 | format version, `u16` LE ([`VERSION`] = 1) |
+//! | 6 | 4 | header length `H`, `u32` LE (≤ [`MAX_HEADER_LEN`]) |
+//! | 10 | `H` | header, postcard ([`Header`], below) |
+//! | 10 + `H` | 0–3 | zero padding to a multiple of 4: the *data start* `D` |
+//! | `samples.offset` | `samples.len` | sample array (below) |
+//! | `valid.offset` | `valid.len` | validity bitmask (below) |
+//! | `durations.offset` | `durations.len` | clip durations, `f32` LE (below) |
+//! | `total_len − 4` | 4 | CRC-32/ISO-HDLC ([`crate::crc`]) of bytes `0 .. total_len − 4`, `u32` LE |
+//!
+//! The writer places the three arrays in this order right after `D`, each at a
+//! 4-aligned offset, zero-padded between them. The reader only requires every
+//! array to be 4-aligned and to lie within `D .. total_len − 4`. Bytes after
+//! `total_len` (erased flash `0xFF`, zeros of an emulator's memory region) are
+//! ignored.
+//!
+//! # Header (postcard 1.x wire format)
+//!
+//! Postcard writes struct fields in order with no tags; `u8` as one raw byte;
+//! `u16`/`u32`/`u64` as unsigned LEB128 varints; `f32` as 4 bytes LE; an enum
+//! as a varint variant index followed by its fields; a fixed array `[T; N]` as
+//! `N` elements back to back; a byte slice as a varint length then the bytes.
+//!
+//! | # | field | encoding | meaning |
+//! |---|---|---|---|
+//! | 1 | `total_len` | varint `u32` | bytes from the magic to the end of the CRC |
+//! | 2 | `rig_hash` | varint `u64` | hash of the rig the table was built for |
+//! | 3 | `kind` | varint 0 = `Grid`; varint 1 = `Clips` then `phases: u8` | see [`Kind`] |
+//! | 4 | `axis_count` | `u8` | 1 ..= [`MAX_AXES`] used axes |
+//! | 5 | `axes` | 6 × [`Axis`] | used axes first, then [`Axis::UNUSED`] |
+//! | 6 | `segment_count` | varint `u16` | 1 ..= [`MAX_SEGMENTS`] |
+//! | 7 | `segment_names` | varint length, bytes | `segment_count` × [`NAME_LEN`] bytes, UTF-8, zero-padded |
+//! | 8 | `position_scale` | `f32` | metres per position LSB (finite, > 0) |
+//! | 9 | `position_bound` | `f32` | stated position error bound, metres |
+//! | 10 | `rotation_bound` | `f32` | stated rotation error bound, radians |
+//! | 11 | `samples` | [`Span`]: varint `u32` offset, varint `u32` length | the sample array |
+//! | 12 | `valid` | [`Span`] | the validity bitmask |
+//! | 13 | `durations` | [`Span`] | the durations (length 0 for a grid) |
+//!
+//! Each [`Axis`] is: `name` 24 bytes (UTF-8, zero-padded), `min: f32`,
+//! `step: f32`, `count`: varint `u16`, `wrap`: varint 0 = `Bounded` or varint 1
+//! = `Cyclic` then `period: f32`, `interp`: varint 0 = `Linear`, 1 =
+//! `CatmullRom`.
+//!
+//! # Arrays
+//!
+//! - **Samples.** Grid samples in row-major order, axis 0 fastest (sample
+//!   index `i = i₀ + n₀·(i₁ + n₁·(i₂ + …))`), and within each grid sample the
+//!   `segment_count` segments in order, 12 bytes each: `samples.len` must be
+//!   `∏ countₖ · segment_count · 12`. One segment sample is
+//!
+//!   | bytes | field |
+//!   |---|---|
+//!   | 0–1, 2–3, 4–5 | position x, y, z: `i16` LE codes, metres = `code · position_scale` |
+//!   | 6–11 | rotation, "smallest three" in a 48-bit LE word |
+//!
+//!   Rotation word bits 0–1: index (in `[w, x, y, z]` order) of the dropped
+//!   component, the one of largest magnitude, made positive by negating the
+//!   whole quaternion; ties go to the lowest index. Bits 2–16, 17–31, 32–46:
+//!   the other three components in `[w, x, y, z]` order, each 15 bits coding
+//!   `v = (code − 16383) · (1/√2) / 16383` (codes 0 ..= 32766 cover
+//!   `[−1/√2, 1/√2]`). Bit 47: zero (ignored by the reader). The dropped
+//!   component is rebuilt as `√max(0, 1 − a² − b² − c²)` and the result
+//!   renormalized. See [`quant`] for the code.
+//! - **Validity bitmask.** One bit per *parameter cell*, in the layout
+//!   [`crate::grid`] takes: cells are numbered row-major over the per-axis
+//!   cell counts (`count − 1` on a bounded axis, `count` on a cyclic one),
+//!   axis 0 fastest, over all axes for a grid and all but the last (phase)
+//!   axis for clips; bit `c` is bit `c mod 8` (LSB first) of byte `c / 8`;
+//!   1 = the cell is backed by data, 0 = it lies outside the data and
+//!   synthesis projects queries out of it. `valid.len` must be
+//!   `⌈parameter cells / 8⌉`; the writer zeroes the unused high bits.
+//! - **Durations** (clips only). `f32` LE seconds, one per phase per parameter
+//!   sample, phase fastest: `durations.len` must be
+//!   `parameter samples · phases · 4`; 0 for a grid.
+//!
+//! # Error bound
+//!
+//! Against the unquantized (normalized) input, each decoded sample is within
+//! `position_bound = 0.51 · position_scale` per coordinate and within
+//! [`quant::ROTATION_BOUND`] = 1.75e-4 rad (0.01°) of rotation angle. The
+//! writer chooses the smallest scale that does not clip the largest
+//! coordinate, and refuses coordinates beyond [`quant::MAX_POSITION`] = 32 m,
+//! so the position bound is always below 0.5 mm. Both bounds are stored in
+//! the header and tested against an `f64` reference in `tests/table.rs`.
+//!
+//! # Size
+//!
+//! 31 segments × 5 × 5 × 5 samples = 46.5 KB of samples plus < 1 KB of header
+//! and mask: five such grids fit the Black Pill's 256 KB table region.
+
+mod header;
+pub mod quant;
+
+pub use header::{
+    Axis, Header, Interp, Kind, MAX_AXES, MAX_SEGMENTS, NAME_LEN, Span, Wrap, name_str,
+};
+pub use quant::SAMPLE_LEN;
+
+use core::fmt;
+
+use glam::{Quat, Vec3};
+
+use crate::crc::crc32;
+use crate::grid::{self, Grid, GridError, Samples};
+
+/// The four magic bytes at the start of every blob.
+pub const MAGIC: [u8; 4] = *b"MRNT";
+
+/// The format version this reader understands and the writer writes.
+pub const VERSION: u16 = 1;
+
+/// Bytes before the header: magic, version, header length.
+pub const PREFIX_LEN: usize = 10;
+
+/// Largest accepted header length (256 segment names plus the fixed fields fit
+/// with room to spare).
+pub const MAX_HEADER_LEN: usize = 8192;
+
+/// Bytes of the trailing CRC.
+pub const CRC_LEN: usize = 4;
+
+/// Why a blob was rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TableError {
+    /// The slice ends before the prefix, the header or `total_len`.
+    Truncated,
+    /// The first four bytes are not `"MRNT"`.
+    BadMagic,
+    /// The format version is not [`VERSION`].
+    BadVersion {
+        /// The version found in the blob.
+        found: u16,
+    },
+    /// The header is not valid postcard for [`Header`], has trailing bytes, or
+    /// holds values out of their domain (axis/segment counts, names, scale).
+    BadHeader,
+    /// An axis has a zero count, a non-finite or non-positive step, or an
+    /// inconsistent period.
+    BadAxis {
+        /// Index of the offending axis.
+        index: u8,
+    },
+    /// A length or offset points outside the blob, is misaligned, or
+    /// overflows.
+    BadBounds,
+    /// An array's length does not match the header's shape.
+    BadSize,
+    /// The CRC does not match.
+    BadCrc,
+    /// The header does not fit the output buffer (writer side).
+    BufferFull,
+}
+
+impl fmt::Display for TableError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Truncated => f.write_str("table blob truncated"),
+            Self::BadMagic => f.write_str("not a table blob (bad magic)"),
+            Self::BadVersion { found } => {
+                write!(f, "table format version {found} (expected {VERSION})")
+            }
+            Self::BadHeader => f.write_str("malformed table header"),
+            Self::BadAxis { index } => write!(f, "table axis {index} is malformed"),
+            Self::BadBounds => f.write_str("table array out of bounds or misaligned"),
+            Self::BadSize => f.write_str("table array size does not match its shape"),
+            Self::BadCrc => f.write_str("table CRC mismatch"),
+            Self::BufferFull => f.write_str("table header does not fit the buffer"),
+        }
+    }
+}
+
+impl core::error::Error for TableError {}
+
+/// Rounds `n` up to a multiple of 4 (`None` on overflow).
+#[inline]
+#[must_use]
+pub fn align4(n: usize) -> Option<usize> {
+    Some(n.checked_add(3)? & !3)
+}
+
+/// The fixed 10-byte prefix for a header of `header_len` bytes.
+#[must_use]
+pub fn prefix(header_len: u32) -> [u8; PREFIX_LEN] {
+    let [m0, m1, m2, m3] = MAGIC;
+    let [v0, v1] = VERSION.to_le_bytes();
+    let [h0, h1, h2, h3] = header_len.to_le_bytes();
+    [m0, m1, m2, m3, v0, v1, h0, h1, h2, h3]
+}
+
+/// Encodes `header` with postcard into `out`; returns the number of bytes
+/// written. The writer's half of the header format.
+pub fn encode_header(header: &Header<'_>, out: &mut [u8]) -> Result<usize, TableError> {
+    postcard::to_slice(header, out)
+        .map(|used| used.len())
+        .map_err(|_| TableError::BufferFull)
+}
+
+/// Counts derived from a header's axes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Shape {
+    /// Product of all axis counts.
+    grid_samples: usize,
+    /// Product of the parameter axes' counts.
+    param_samples: usize,
+    /// Product of the parameter axes' cell counts.
+    param_cells: usize,
+}
+
+/// The [`Shape`] of a header's axes; checks every used axis.
+fn shape(header: &Header<'_>) -> Result<Shape, TableError> {
+    let axes = header
+        .axes
+        .get(..usize::from(header.axis_count))
+        .ok_or(TableError::BadHeader)?;
+    let param_axes = match header.kind {
+        Kind::Grid => axes.len(),
+        Kind::Clips { phases: 1.. } => axes.len().checked_sub(1).ok_or(TableError::BadHeader)?,
+        Kind::Clips { phases: 0 } => return Err(TableError::BadHeader),
+    };
+    if axes.is_empty() {
+        return Err(TableError::BadHeader);
+    }
+    let mut shape = Shape {
+        grid_samples: 1,
+        param_samples: 1,
+        param_cells: 1,
+    };
+    for (i, axis) in axes.iter().enumerate() {
+        if !axis.is_valid() {
+            // `i < MAX_AXES = 6`, so it fits a u8.
+            return Err(TableError::BadAxis { index: i as u8 });
+        }
+        let count = usize::from(axis.count);
+        shape.grid_samples = shape
+            .grid_samples
+            .checked_mul(count)
+            .ok_or(TableError::BadBounds)?;
+        if i < param_axes {
+            shape.param_samples = shape.grid_samples;
+            shape.param_cells = shape
+                .param_cells
+                .checked_mul(axis.cells())
+                .ok_or(TableError::BadBounds)?;
+        }
+    }
+    Ok(shape)
+}
+
+/// Checks the header's segment fields and scale.
+fn check_segments(header: &Header<'_>) -> Result<(), TableError> {
+    let count = usize::from(header.segment_count);
+    let names_ok = count.checked_mul(NAME_LEN) == Some(header.segment_names.len());
+    let scale_ok = header.position_scale.is_finite() && header.position_scale > 0.0;
+    if (1..=MAX_SEGMENTS).contains(&count) && names_ok && scale_ok {
+        Ok(())
+    } else {
+        Err(TableError::BadHeader)
+    }
+}
+
+/// The bytes of `span`, which must be 4-aligned, lie in `data` (the blob from
+/// the data start to the CRC, starting at blob offset `start`) and be exactly
+/// `expected` long.
+fn array(
+    data: &[u8],
+    start: usize,
+    span: Span,
+    expected: Option<usize>,
+) -> Result<&[u8], TableError> {
+    let offset = usize::try_from(span.offset).map_err(|_| TableError::BadBounds)?;
+    let len = usize::try_from(span.len).map_err(|_| TableError::BadBounds)?;
+    let from = offset.checked_sub(start).ok_or(TableError::BadBounds)?;
+    let to = from.checked_add(len).ok_or(TableError::BadBounds)?;
+    let bytes = data.get(from..to).ok_or(TableError::BadBounds)?;
+    if offset % 4 != 0 {
+        return Err(TableError::BadBounds);
+    }
+    if expected != Some(len) {
+        return Err(TableError::BadSize);
+    }
+    Ok(bytes)
+}
+
+/// Reads the prefix and decodes the header; returns it with the data start.
+fn read_header(bytes: &[u8]) -> Result<(Header<'_>, usize), TableError> {
+    let Some((&[m0, m1, m2, m3, v0, v1, h0, h1, h2, h3], rest)) =
+        bytes.split_first_chunk::<PREFIX_LEN>()
+    else {
+        return Err(TableError::Truncated);
+    };
+    if [m0, m1, m2, m3] != MAGIC {
+        return Err(TableError::BadMagic);
+    }
+    let found = u16::from_le_bytes([v0, v1]);
+    if found != VERSION {
+        return Err(TableError::BadVersion { found });
+    }
+    let header_len =
+        usize::try_from(u32::from_le_bytes([h0, h1, h2, h3])).map_err(|_| TableError::BadBounds)?;
+    if header_len > MAX_HEADER_LEN {
+        return Err(TableError::BadBounds);
+    }
+    let raw = rest.get(..header_len).ok_or(TableError::Truncated)?;
+    let header = match postcard::take_from_bytes::<Header<'_>>(raw) {
+        Ok((header, [])) => header,
+        _ => return Err(TableError::BadHeader),
+    };
+    // header_len ≤ MAX_HEADER_LEN, so neither step can overflow; checked anyway.
+    let start = PREFIX_LEN
+        .checked_add(header_len)
+        .and_then(align4)
+        .ok_or(TableError::BadBounds)?;
+    Ok((header, start))
+}
+
+/// Splits off the CRC-checked blob body `[start, total_len − 4)` after
+/// verifying the CRC.
+fn checked_data(bytes: &[u8], total_len: u32, start: usize) -> Result<&[u8], TableError> {
+    let total = usize::try_from(total_len).map_err(|_| TableError::BadBounds)?;
+    let blob = bytes.get(..total).ok_or(TableError::Truncated)?;
+    let crc_at = total.checked_sub(CRC_LEN).ok_or(TableError::BadBounds)?;
+    let (covered, stored) = blob.split_at_checked(crc_at).ok_or(TableError::BadBounds)?;
+    let stored = stored
+        .first_chunk::<CRC_LEN>()
+        .ok_or(TableError::BadBounds)?;
+    if crc32(covered) != u32::from_le_bytes(*stored) {
+        return Err(TableError::BadCrc);
+    }
+    covered.get(start..).ok_or(TableError::BadBounds)
+}
+
+/// A parsed table blob, borrowing the blob's bytes (flash) for its whole life.
+#[derive(Clone, Copy, Debug)]
+pub struct Table<'a> {
+    header: Header<'a>,
+    samples: &'a [u8],
+    valid: &'a [u8],
+    durations: &'a [u8],
+    shape: Shape,
+}
+
+impl<'a> Table<'a> {
+    /// Validates a blob and returns a reader over it.
+    ///
+    /// Checks, in order: prefix length ([`TableError::Truncated`]), magic,
+    /// version, header length (≤ [`MAX_HEADER_LEN`], within the slice), the
+    /// postcard header (exactly `H` bytes), `total_len` within the slice, the
+    /// CRC, then the shape (axes, segments, names, scale) and every array's
+    /// bounds, alignment and size. Trailing bytes after `total_len` are
+    /// ignored. Never panics; all offset arithmetic is checked.
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, TableError> {
+        let (header, start) = read_header(bytes)?;
+        let data = checked_data(bytes, header.total_len, start)?;
+        check_segments(&header)?;
+        let shape = shape(&header)?;
+        let sample_bytes = shape
+            .grid_samples
+            .checked_mul(usize::from(header.segment_count))
+            .and_then(|n| n.checked_mul(SAMPLE_LEN));
+        let duration_bytes = match header.kind {
+            Kind::Grid => Some(0),
+            Kind::Clips { phases } => shape
+                .param_samples
+                .checked_mul(usize::from(phases))
+                .and_then(|n| n.checked_mul(4)),
+        };
+        let samples = array(data, start, header.samples, sample_bytes)?;
+        let valid = array(
+            data,
+            start,
+            header.valid,
+            Some(shape.param_cells.div_ceil(8)),
+        )?;
+        let durations = array(data, start, header.durations, duration_bytes)?;
+        Ok(Self {
+            header,
+            samples,
+            valid,
+            durations,
+            shape,
+        })
+    }
+
+    /// The decoded header (for `marionette inspect`).
+    #[inline]
+    #[must_use]
+    pub fn header(&self) -> &Header<'a> {
+        &self.header
+    }
+
+    /// The table's kind.
+    #[inline]
+    #[must_use]
+    pub fn kind(&self) -> Kind {
+        self.header.kind
+    }
+
+    /// Hash of the rig the table was built for.
+    #[inline]
+    #[must_use]
+    pub fn rig_hash(&self) -> u64 {
+        self.header.rig_hash
+    }
+
+    /// Bytes of the blob from the magic to the end of the CRC.
+    #[inline]
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.header.total_len as usize
+    }
+
+    /// Always `false`: a parsed blob holds at least its prefix and CRC.
+    #[inline]
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// The used axes, axis 0 fastest in the sample order (for clip tables the
+    /// last one is the phase axis).
+    #[must_use]
+    pub fn axes(&self) -> &[Axis] {
+        self.header
+            .axes
+            .get(..usize::from(self.header.axis_count))
+            .unwrap_or(&[])
+    }
+
+    /// Number of segments per pose.
+    #[inline]
+    #[must_use]
+    pub fn segment_count(&self) -> usize {
+        usize::from(self.header.segment_count)
+    }
+
+    /// Name of segment `segment` (`None` out of range or not UTF-8).
+    #[must_use]
+    pub fn segment_name(&self, segment: usize) -> Option<&'a str> {
+        let from = segment.checked_mul(NAME_LEN)?;
+        name_str(
+            self.header
+                .segment_names
+                .get(from..from.checked_add(NAME_LEN)?)?,
+        )
+    }
+
+    /// Index of the segment named `name`.
+    #[must_use]
+    pub fn segment_index(&self, name: &str) -> Option<usize> {
+        (0..self.segment_count()).find(|&s| self.segment_name(s) == Some(name))
+    }
+
+    /// Number of grid samples (product of all axis counts).
+    #[inline]
+    #[must_use]
+    pub fn grid_samples(&self) -> usize {
+        self.shape.grid_samples
+    }
+
+    /// Number of parameter samples (product of the parameter axes' counts: all
+    /// axes for a grid, all but the phase axis for clips).
+    #[inline]
+    #[must_use]
+    pub fn param_samples(&self) -> usize {
+        self.shape.param_samples
+    }
+
+    /// Number of parameter cells (product of the parameter axes' cell counts):
+    /// the length in bits of the validity mask.
+    #[inline]
+    #[must_use]
+    pub fn param_cells(&self) -> usize {
+        self.shape.param_cells
+    }
+
+    /// The parameter axes: all axes for a grid, all but the last for clips.
+    #[must_use]
+    pub fn param_axes(&self) -> &[Axis] {
+        let axes = self.axes();
+        match self.header.kind {
+            Kind::Grid => axes,
+            Kind::Clips { .. } => axes.split_last().map_or(&[], |(_, params)| params),
+        }
+    }
+
+    /// The synthesis grid over all axes (for clips the phase axis included).
+    /// A grid table carries its validity mask; a clip table's mask covers the
+    /// parameter cells only, see [`Table::param_grid`].
+    pub fn grid(&self) -> Result<Grid<'a>, GridError> {
+        let (axes, n) = grid_axes(self.axes());
+        let mask = match self.header.kind {
+            Kind::Grid => Some(self.valid),
+            Kind::Clips { .. } => None,
+        };
+        Grid::new(axes.get(..n).unwrap_or(&[]), mask)
+    }
+
+    /// The grid over the parameter axes with the validity mask: the grid of a
+    /// grid table, the parameter grid of a clip table (whose clips are
+    /// parameter samples; [`GridError::AxisCount`] for a single clip).
+    pub fn param_grid(&self) -> Result<Grid<'a>, GridError> {
+        let (axes, n) = grid_axes(self.param_axes());
+        Grid::new(axes.get(..n).unwrap_or(&[]), Some(self.valid))
+    }
+
+    /// Metres per position LSB.
+    #[inline]
+    #[must_use]
+    pub fn position_scale(&self) -> f32 {
+        self.header.position_scale
+    }
+
+    /// The 12 stored bytes of one segment sample.
+    #[must_use]
+    pub fn raw_sample(&self, index: usize, segment: usize) -> Option<&'a [u8; SAMPLE_LEN]> {
+        if segment >= self.segment_count() {
+            return None;
+        }
+        let slot = index
+            .checked_mul(self.segment_count())?
+            .checked_add(segment)?;
+        let from = slot.checked_mul(SAMPLE_LEN)?;
+        self.samples.get(from..)?.first_chunk::<SAMPLE_LEN>()
+    }
+
+    /// Decodes the position and rotation of `segment` at grid sample `index`
+    /// (row-major, axis 0 fastest). `None` if either is out of range.
+    #[must_use]
+    pub fn sample(&self, index: usize, segment: usize) -> Option<(Vec3, Quat)> {
+        Some(quant::decode_sample(
+            self.raw_sample(index, segment)?,
+            self.header.position_scale,
+        ))
+    }
+
+    /// Whether parameter cell `index` is backed by data (`None` out of range).
+    #[must_use]
+    pub fn cell_valid(&self, index: usize) -> Option<bool> {
+        if index >= self.shape.param_cells {
+            return None;
+        }
+        let byte = self.valid.get(index / 8)?;
+        Some(byte >> (index % 8) & 1 == 1)
+    }
+
+    /// The raw validity bitmask (see the module docs).
+    #[inline]
+    #[must_use]
+    pub fn valid_mask(&self) -> &'a [u8] {
+        self.valid
+    }
+
+    /// Duration in seconds of `phase` of the clip at parameter sample `index`
+    /// (`None` for a grid or out of range).
+    #[must_use]
+    pub fn duration(&self, index: usize, phase: usize) -> Option<f32> {
+        let Kind::Clips { phases } = self.header.kind else {
+            return None;
+        };
+        if phase >= usize::from(phases) {
+            return None;
+        }
+        let slot = index.checked_mul(usize::from(phases))?.checked_add(phase)?;
+        let bytes = self
+            .durations
+            .get(slot.checked_mul(4)?..)?
+            .first_chunk::<4>()?;
+        Some(f32::from_le_bytes(*bytes))
+    }
+}
+
+/// The grid axes of `axes`, and how many there are.
+fn grid_axes(axes: &[Axis]) -> ([grid::Axis; MAX_AXES], usize) {
+    let mut out = [grid::Axis::linear(0.0, 1.0, 2); MAX_AXES];
+    let mut n = 0;
+    for (slot, axis) in out.iter_mut().zip(axes) {
+        *slot = axis.to_grid();
+        n += 1;
+    }
+    (out, n)
+}
+
+impl Samples for Table<'_> {
+    #[inline]
+    fn segment_count(&self) -> usize {
+        usize::from(self.header.segment_count)
+    }
+
+    #[inline]
+    fn sample_count(&self) -> usize {
+        self.shape.grid_samples
+    }
+
+    #[inline]
+    fn sample(&self, index: usize, segment: usize) -> Option<(Vec3, Quat)> {
+        Table::sample(self, index, segment)
+    }
+}
