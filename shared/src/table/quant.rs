@@ -37,13 +37,16 @@ pub const POSITION_BOUND_PER_SCALE: f32 = 0.51;
 /// [`dequantize_rotation`]: the rotation angle between the input and the
 /// decoded quaternion, in radians (1.75e-4 rad ≈ 0.01°).
 ///
-/// Derivation: the three stored components lie in `[−1/√2, 1/√2]` and are
-/// coded with step `Δ = (1/√2) / 16383 ≈ 4.32e-5`, so each is off by at most
-/// `Δ/2`, the three together by `|e| ≤ √3·Δ/2 ≈ 3.7e-5`. The rebuilt largest
-/// component `L = √(1 − |s|²)` moves by `|s·e| / L ≤ √3·|e|` (because `L ≥ ½`
-/// and `|s| / L ≤ √3`), so the quaternion moves by at most `2|e|`, and the
-/// rotation angle (twice the quaternion angle) by at most `≈ 4|e| = 1.5e-4`
-/// rad. The tests measure the real maximum against an `f64` reference.
+/// Derivation: the three stored components `s` lie in `[−1/√2, 1/√2]` and are
+/// coded with step `Δ = (1/√2) / 16383 ≈ 4.316e-5`, so each is off by at most
+/// `Δ/2`: `|e| ≤ √3·Δ/2`. The rebuilt largest component `L = √(1 − |s|²)`
+/// moves by `−(s·e)/L`, at most `3·Δ/2` because every `|sᵢ| ≤ L`. That change
+/// is orthogonal to the quaternion to first order, so the quaternion turns by
+/// at most `√(3 + 9)·Δ/2 = √3·Δ` and the rotation by twice that,
+/// `2√3·Δ = 1.495e-4` rad (0.00857°), reached when `s = (L, L, L)` (all four
+/// components ½) with every rounding error at its maximum and the same sign.
+/// `tests/table.rs` measures exactly that maximum against an `f64` reference;
+/// the stated bound leaves 17 % for `f32` rounding.
 pub const ROTATION_BOUND: f32 = 1.75e-4;
 
 /// Code of the component value 0 (the middle of the 15-bit range).
