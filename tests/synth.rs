@@ -1,1 +1,740 @@
-//! (synth tests, in progress)
+//! Pose synthesis against independent references: the grid (W&H static
+//! synthesis), clips (motion synthesis), and forward kinematics, checked
+//! against slow `f64` implementations in `marionette_tests::synth_ref` and
+//! closed forms.
+
+use glam::{Quat, Vec3};
+use marionette_core::grid::{
+    Adjust, Axis, AxisKind, Grid, GridError, Interp, Samples, SliceSamples,
+};
+use marionette_core::math;
+use marionette_core::pose::{self, Hierarchy, LocalPose, NO_PARENT, Pose};
+use marionette_tests::synth_ref::{self as r, Q, Rng, V};
+
+fn q32(q: Q) -> Quat {
+    Quat::from_xyzw(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32)
+}
+fn q64(q: Quat) -> Q {
+    [q.x, q.y, q.z, q.w].map(f64::from)
+}
+fn v32(v: V) -> Vec3 {
+    Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32)
+}
+fn v64(v: Vec3) -> V {
+    [v.x, v.y, v.z].map(f64::from)
+}
+fn dist(a: V, b: V) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// An axis description for the f64 reference.
+#[derive(Clone, Copy)]
+struct RefAxis {
+    min: f64,
+    step: f64,
+    count: usize,
+    cyclic: bool,
+    cubic: bool,
+}
+
+impl RefAxis {
+    fn core(&self) -> Axis {
+        Axis {
+            min: self.min as f32,
+            step: self.step as f32,
+            count: self.count as u32,
+            kind: if self.cyclic {
+                AxisKind::Cyclic {
+                    period: (self.step * self.count as f64) as f32,
+                }
+            } else {
+                AxisKind::Bounded
+            },
+            interp: if self.cubic {
+                Interp::CatmullRom
+            } else {
+                Interp::Linear
+            },
+        }
+    }
+}
+
+/// A grid of f64 samples, `[sample][segment]`, axis 0 fastest.
+struct RefGrid {
+    axes: Vec<RefAxis>,
+    segments: usize,
+    pos: Vec<V>,
+    rot: Vec<Q>,
+}
+
+impl RefGrid {
+    fn sample_count(&self) -> usize {
+        self.axes.iter().map(|a| a.count).product()
+    }
+
+    fn core_samples(&self) -> (Vec<Vec3>, Vec<Quat>) {
+        (
+            self.pos.iter().map(|&p| v32(p)).collect(),
+            self.rot.iter().map(|&q| q32(q)).collect(),
+        )
+    }
+
+    /// The f32 samples read back as f64 (what the core actually sees).
+    fn rounded(&self) -> RefGrid {
+        RefGrid {
+            axes: self.axes.clone(),
+            segments: self.segments,
+            pos: self.pos.iter().map(|&p| v64(v32(p))).collect(),
+            rot: self.rot.iter().map(|&q| q64(q32(q))).collect(),
+        }
+    }
+
+    /// Straightforward evaluation: locate per axis, gather the window
+    /// recursively (last axis outermost), reduce axis 0 first with lerp/slerp or
+    /// Catmull-Rom (Hermite form for positions, Barry–Goldman pyramid with exact
+    /// slerp for rotations; phantoms built explicitly at bounded ends).
+    fn eval(&self, params: &[f64], seg: usize) -> (V, Q) {
+        let loc: Vec<(usize, f64)> = self
+            .axes
+            .iter()
+            .zip(params)
+            .map(|(a, &p)| {
+                let n = a.count as f64;
+                let mut u = (p - a.min) / a.step;
+                if a.cyclic {
+                    u = u.rem_euclid(n);
+                } else {
+                    u = u.clamp(0.0, n - 1.0);
+                }
+                let cells = if a.cyclic { a.count } else { a.count - 1 };
+                let k = (u.floor() as usize).min(cells - 1);
+                (k, u - k as f64)
+            })
+            .collect();
+        self.reduce(self.axes.len(), &loc, &mut vec![0; self.axes.len()], seg)
+    }
+
+    fn reduce(
+        &self,
+        level: usize,
+        loc: &[(usize, f64)],
+        idx: &mut Vec<usize>,
+        seg: usize,
+    ) -> (V, Q) {
+        if level == 0 {
+            let mut i = 0;
+            for (a, &k) in self.axes.iter().zip(idx.iter()).rev() {
+                i = i * a.count + k;
+            }
+            let s = i * self.segments + seg;
+            return (self.pos[s], self.rot[s]);
+        }
+        let a = level - 1;
+        let ax = self.axes[a];
+        let (k, t) = loc[a];
+        let wrap = |i: isize| -> Option<usize> {
+            let n = ax.count as isize;
+            if ax.cyclic {
+                Some(i.rem_euclid(n) as usize)
+            } else if (0..n).contains(&i) {
+                Some(i as usize)
+            } else {
+                None
+            }
+        };
+        let mut get = |i: isize| -> Option<(V, Q)> {
+            let j = wrap(i)?;
+            idx[a] = j;
+            Some(self.reduce(a, loc, idx, seg))
+        };
+        let k = k as isize;
+        if !ax.cubic {
+            let (p0, q0) = get(k).unwrap();
+            let (p1, q1) = get(k + 1).unwrap();
+            return (r::lerp3(p0, p1, t), r::slerp(q0, q1, t));
+        }
+        let (p1, q1) = get(k).unwrap();
+        let (p2, q2) = get(k + 1).unwrap();
+        // Phantoms: linear extrapolation of positions, slerp to ±1 beyond for rotations.
+        let (p0, q0) = get(k - 1).unwrap_or((
+            [0, 1, 2].map(|i| 2.0 * p1[i] - p2[i]),
+            r::slerp(q1, q2, -1.0),
+        ));
+        let (p3, q3) = get(k + 2).unwrap_or((
+            [0, 1, 2].map(|i| 2.0 * p2[i] - p1[i]),
+            r::slerp(q1, q2, 2.0),
+        ));
+        let p = [0, 1, 2].map(|i| r::catmull_rom(p0[i], p1[i], p2[i], p3[i], t));
+        (p, r::spherical_catmull_rom([q0, q1, q2, q3], t))
+    }
+}
+
+/// Random grid with rotations that vary smoothly (each sample is a base
+/// rotation times a rotation by up to `spread` rad), positions random in ±1 m.
+fn random_grid(axes: Vec<RefAxis>, segments: usize, spread: f64, seed: u64) -> RefGrid {
+    let mut rng = Rng::new(seed);
+    let n = axes.iter().map(|a| a.count).product::<usize>() * segments;
+    let base: Vec<Q> = (0..segments).map(|_| rng.quat()).collect();
+    let mut pos = Vec::with_capacity(n);
+    let mut rot = Vec::with_capacity(n);
+    for i in 0..n {
+        pos.push([0; 3].map(|_| rng.range(-1.0, 1.0)));
+        let axis = [0; 3].map(|_| rng.range(-1.0, 1.0));
+        let d = r::axis_angle(axis, rng.range(0.0, spread));
+        let q = r::mul(base[i % segments], d);
+        // Random sign: the grid must not care.
+        rot.push(if rng.range(0.0, 1.0) < 0.5 {
+            q
+        } else {
+            q.map(|v| -v)
+        });
+    }
+    RefGrid {
+        axes,
+        segments,
+        pos,
+        rot,
+    }
+}
+
+fn lin(min: f64, step: f64, count: usize) -> RefAxis {
+    RefAxis {
+        min,
+        step,
+        count,
+        cyclic: false,
+        cubic: false,
+    }
+}
+
+fn random_params(rng: &mut Rng, axes: &[RefAxis], margin: f64) -> Vec<f64> {
+    axes.iter()
+        .map(|a| {
+            let span = if a.cyclic {
+                a.step * a.count as f64
+            } else {
+                a.step * (a.count - 1) as f64
+            };
+            rng.range(a.min - margin * span, a.min + (1.0 + margin) * span)
+        })
+        .collect()
+}
+
+fn core_grid(g: &RefGrid) -> (Vec<Axis>, Vec<Vec3>, Vec<Quat>) {
+    let (p, q) = g.core_samples();
+    (g.axes.iter().map(RefAxis::core).collect(), p, q)
+}
+
+#[test]
+fn grid_points_return_samples_exactly() {
+    let cr = RefAxis {
+        cubic: true,
+        ..lin(0.2, 0.2, 5)
+    };
+    let cyc = RefAxis {
+        cyclic: true,
+        cubic: true,
+        ..lin(-1.0, 0.25, 8)
+    };
+    for axes in [
+        vec![lin(-0.3, 0.1, 5), lin(0.8, 0.15, 4), lin(0.2, 0.2, 3)],
+        vec![lin(-0.3, 0.1, 4), cr, cyc],
+    ] {
+        let g = random_grid(axes, 5, 0.8, 1);
+        let (axes, p, q) = core_grid(&g);
+        let grid = Grid::new(&axes, None).unwrap();
+        let samples = SliceSamples::new(5, &p, &q).unwrap();
+        let mut out = Pose::<8>::default();
+        for s in 0..g.sample_count() {
+            let (mut rest, mut params) = (s, Vec::new());
+            for a in &axes {
+                params.push(a.min + (rest % a.count as usize) as f32 * a.step);
+                rest /= a.count as usize;
+            }
+            let adj = grid.synthesize(&samples, &params, &mut out).unwrap();
+            assert_eq!(adj, Adjust::None);
+            assert_eq!(out.len(), 5);
+            for seg in 0..5 {
+                assert_eq!(out.positions[seg], p[s * 5 + seg], "sample {s} seg {seg}");
+                assert_eq!(out.rotations[seg], q[s * 5 + seg], "sample {s} seg {seg}");
+            }
+        }
+    }
+}
+
+#[test]
+fn affine_positions_are_reproduced() {
+    // Positions an affine function of the parameters: every query reproduces
+    // it, on linear axes and on Catmull-Rom axes (bounded ends included).
+    let mut rng = Rng::new(2);
+    let cr = |a: RefAxis| RefAxis { cubic: true, ..a };
+    for axes in [
+        vec![lin(-0.3, 0.1, 5), lin(0.8, 0.15, 4), lin(0.2, 0.2, 3)],
+        vec![
+            cr(lin(-0.3, 0.1, 5)),
+            lin(0.8, 0.15, 4),
+            cr(lin(0.2, 0.2, 4)),
+        ],
+    ] {
+        let m: Vec<[V; 3]> = (0..3)
+            .map(|_| [0; 3].map(|_| [0; 3].map(|_| rng.range(-2.0, 2.0))))
+            .collect();
+        let b: Vec<V> = (0..3)
+            .map(|_| [0; 3].map(|_| rng.range(-1.0, 1.0)))
+            .collect();
+        let affine = |seg: usize, x: &[f64]| -> V {
+            [0, 1, 2].map(|i| b[seg][i] + (0..3).map(|j| m[seg][j][i] * x[j]).sum::<f64>())
+        };
+        let mut g = random_grid(axes.clone(), 3, 0.5, 3);
+        for s in 0..g.sample_count() {
+            let (mut rest, mut x) = (s, Vec::new());
+            for a in &axes {
+                x.push(a.min + (rest % a.count) as f64 * a.step);
+                rest /= a.count;
+            }
+            for seg in 0..3 {
+                g.pos[s * 3 + seg] = affine(seg, &x);
+            }
+        }
+        let (caxes, p, q) = core_grid(&g);
+        let grid = Grid::new(&caxes, None).unwrap();
+        let samples = SliceSamples::new(3, &p, &q).unwrap();
+        let mut out = Pose::<3>::default();
+        let mut max = 0.0f64;
+        for _ in 0..5000 {
+            let x = random_params(&mut rng, &axes, 0.0);
+            let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+            grid.synthesize(&samples, &xf, &mut out).unwrap();
+            let xe: Vec<f64> = xf.iter().map(|&v| f64::from(v)).collect();
+            for seg in 0..3 {
+                max = max.max(dist(v64(out.positions[seg]), affine(seg, &xe)));
+            }
+        }
+        println!("affine reproduction max error {max:e} m");
+        assert!(max < 2e-5, "{max:e}");
+    }
+}
+
+#[test]
+fn grid_matches_f64_reference_tree() {
+    // Trilinear (W&H hand grid), the W&H pedalling layout (2 linear + cyclic
+    // Catmull-Rom), and a bounded Catmull-Rom mix, against the f64 tree.
+    let cr = |a: RefAxis| RefAxis { cubic: true, ..a };
+    let cyc = |a: RefAxis| RefAxis { cyclic: true, ..a };
+    let configs = [
+        vec![lin(-0.3, 0.1, 5), lin(0.8, 0.15, 4), lin(0.2, 0.2, 3)],
+        vec![
+            lin(-0.2, 0.1, 3),
+            lin(0.1, 0.05, 3),
+            cr(cyc(lin(0.0, std::f64::consts::TAU / 8.0, 8))),
+        ],
+        vec![cr(lin(0.0, 0.5, 6)), lin(1.0, 1.0, 2)],
+        vec![
+            lin(0.0, 1.0, 3),
+            lin(0.0, 1.0, 2),
+            lin(0.0, 1.0, 2),
+            lin(0.0, 1.0, 2),
+            lin(0.0, 1.0, 2),
+            lin(0.0, 1.0, 2),
+        ],
+    ];
+    let mut rng = Rng::new(4);
+    for (ci, axes) in configs.into_iter().enumerate() {
+        let g = random_grid(axes.clone(), 4, 1.2, 10 + ci as u64);
+        let gr = g.rounded();
+        let (caxes, p, q) = core_grid(&g);
+        let grid = Grid::new(&caxes, None).unwrap();
+        let samples = SliceSamples::new(4, &p, &q).unwrap();
+        let mut out = Pose::<4>::default();
+        let (mut ep, mut eq) = (0.0f64, 0.0f64);
+        for _ in 0..3000 {
+            let x = random_params(&mut rng, &axes, 0.0);
+            let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+            let query = grid.query(&xf).unwrap();
+            query.pose(&samples, &mut out).unwrap();
+            // Compare at the parameters the query reports using (grid-point
+            // snapping moves them by at most a few ulp).
+            for (&a, &b) in query.params().iter().zip(&xf) {
+                assert!((a - b).abs() <= 1e-6 * (1.0 + b.abs()), "{a} {b}");
+            }
+            let xe: Vec<f64> = query.params().iter().map(|&v| f64::from(v)).collect();
+            for seg in 0..4 {
+                let (pe, qe) = gr.eval(&xe, seg);
+                ep = ep.max(dist(v64(out.positions[seg]), pe));
+                eq = eq.max(r::angle_between(q64(out.rotations[seg]), qe));
+                let (ps, qs) = grid.query(&xf).unwrap().segment(&samples, seg).unwrap();
+                assert_eq!((ps, qs), (out.positions[seg], out.rotations[seg]));
+            }
+        }
+        println!("config {ci}: max position error {ep:e} m, rotation {eq:e} rad");
+        assert!(ep < 1e-5, "config {ci}: {ep:e}");
+        assert!(eq < 5e-5, "config {ci}: {eq:e}");
+    }
+}
+
+/// One Catmull-Rom axis with `count` samples of scalar data (in x), rotation
+/// about Z by the same value (radians).
+fn scalar_cr_grid(
+    min: f64,
+    step: f64,
+    count: usize,
+    cyclic: bool,
+    f: impl Fn(f64) -> f64,
+) -> RefGrid {
+    let axes = vec![RefAxis {
+        min,
+        step,
+        count,
+        cyclic,
+        cubic: true,
+    }];
+    let pos = (0..count)
+        .map(|i| [f(min + i as f64 * step), 0.0, 0.0])
+        .collect();
+    let rot = (0..count)
+        .map(|i| r::axis_angle([0.0, 0.0, 1.0], f(min + i as f64 * step)))
+        .collect();
+    RefGrid {
+        axes,
+        segments: 1,
+        pos,
+        rot,
+    }
+}
+
+fn eval_scalar(g: &RefGrid, x: f32) -> (f64, Q) {
+    let (caxes, p, q) = core_grid(g);
+    let grid = Grid::new(&caxes, None).unwrap();
+    let samples = SliceSamples::new(1, &p, &q).unwrap();
+    let (pp, qq) = grid.query(&[x]).unwrap().segment(&samples, 0).unwrap();
+    (f64::from(pp.x), q64(qq))
+}
+
+#[test]
+fn catmull_rom_reproduces_quadratics_inside_and_lines_everywhere() {
+    // Uniform Catmull-Rom's tangents are central differences, exact for
+    // quadratics: degree-2 data is reproduced in interior cells. Bounded ends
+    // use a linear phantom: lines are reproduced there, quadratics are not.
+    let quad = |x: f64| 0.2 + 0.3 * x - 0.25 * x * x;
+    let line = |x: f64| -0.4 + 0.7 * x;
+    let (gq, gl) = (
+        scalar_cr_grid(0.0, 0.5, 7, false, quad),
+        scalar_cr_grid(0.0, 0.5, 7, false, line),
+    );
+    let (mut inner, mut ends, mut lin_err, mut rot_lin, mut rot_quad) =
+        (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for i in 0..=3000 {
+        let x = (i as f64 * 3.0 / 3000.0) as f32;
+        let xe = f64::from(x);
+        let (pq, qq) = eval_scalar(&gq, x);
+        let (pl, ql) = eval_scalar(&gl, x);
+        let interior = (0.5..=2.5).contains(&xe);
+        if interior {
+            inner = inner.max((pq - quad(xe)).abs());
+            rot_quad = rot_quad.max(r::angle_between(
+                qq,
+                r::axis_angle([0.0, 0.0, 1.0], quad(xe)),
+            ));
+        } else {
+            ends = ends.max((pq - quad(xe)).abs());
+        }
+        lin_err = lin_err.max((pl - line(xe)).abs());
+        rot_lin = rot_lin.max(r::angle_between(
+            ql,
+            r::axis_angle([0.0, 0.0, 1.0], line(xe)),
+        ));
+    }
+    println!(
+        "CR: quadratic interior {inner:e}, quadratic end cells {ends:e}, line {lin_err:e}; rotation line {rot_lin:e}, quadratic interior {rot_quad:e}"
+    );
+    assert!(inner < 2e-7 && lin_err < 5e-7, "{inner:e} {lin_err:e}");
+    assert!(
+        rot_lin < 5e-5 && rot_quad < 5e-5,
+        "{rot_lin:e} {rot_quad:e}"
+    );
+    // End cells: the phantom makes the end tangent the chord slope, so the
+    // quadratic is missed by a visible amount (about |f''|·h²/16 here).
+    assert!(ends > 1e-3, "{ends:e}");
+    // Not exact for cubics: the central difference of c·x³ overestimates the
+    // slope by δ = c·h², so the Hermite form is off by h·δ·(h10(s) + h11(s))
+    // (zero at the cell midpoint, 1.17e-3 at s = 1/4 for c = 0.1, h = 0.5).
+    let cube = |x: f64| 0.1 * x * x * x;
+    let gc = scalar_cr_grid(0.0, 0.5, 7, false, cube);
+    let (pc, _) = eval_scalar(&gc, 1.125);
+    let (h, s) = (0.5f64, 0.25f64);
+    let predicted = h * 0.1 * h * h * ((s.powi(3) - 2.0 * s * s + s) + (s.powi(3) - s * s));
+    assert!(
+        ((pc - cube(1.125)) - predicted).abs() < 1e-6,
+        "{} vs {predicted}",
+        pc - cube(1.125)
+    );
+}
+
+#[test]
+fn cyclic_axis_is_continuous_across_the_wrap() {
+    let mut rng = Rng::new(6);
+    let axes = vec![
+        RefAxis {
+            min: 0.5,
+            step: 0.25,
+            count: 8,
+            cyclic: true,
+            cubic: true,
+        },
+        lin(0.0, 1.0, 2),
+    ];
+    let g = random_grid(axes, 2, 1.0, 7);
+    let (caxes, p, q) = core_grid(&g);
+    let grid = Grid::new(&caxes, None).unwrap();
+    let samples = SliceSamples::new(2, &p, &q).unwrap();
+    let y = rng.range(0.0, 1.0) as f32;
+    let at = |x: f32| grid.query(&[x, y]).unwrap().segment(&samples, 1).unwrap();
+    // Same pose one period apart, and tiny steps give tiny changes everywhere,
+    // including across min + period.
+    for i in 0..50 {
+        let x = 0.5 + i as f32 * 0.04;
+        let (p0, q0) = at(x);
+        let (p1, q1) = at(x + 2.0);
+        assert!((p0 - p1).length() < 1e-5 && r::angle_between(q64(q0), q64(q1)) < 1e-4);
+    }
+    let (mut jump_p, mut jump_q) = (0.0f32, 0.0f64);
+    let mut prev = at(0.4);
+    for i in 1..=4000 {
+        let cur = at(0.4 + i as f32 * 5e-5);
+        jump_p = jump_p.max((cur.0 - prev.0).length());
+        jump_q = jump_q.max(r::angle_between(q64(cur.1), q64(prev.1)));
+        prev = cur;
+    }
+    println!("cyclic sweep across the wrap: max step {jump_p:e} m, {jump_q:e} rad per 5e-5");
+    assert!(jump_p < 2e-3 && jump_q < 2e-3, "{jump_p:e} {jump_q:e}");
+}
+
+#[test]
+fn nan_clamp_and_invalid_cell_policies() {
+    let axes = vec![lin(0.0, 1.0, 5), lin(0.0, 1.0, 3)];
+    let g = random_grid(axes, 1, 0.5, 8);
+    let (caxes, p, q) = core_grid(&g);
+    let samples = SliceSamples::new(1, &p, &q).unwrap();
+    let grid = Grid::new(&caxes, None).unwrap();
+    let mut out = Pose::<1>::default();
+    assert_eq!(
+        grid.synthesize(&samples, &[f32::NAN, 0.0], &mut out),
+        Err(GridError::NonFinite { axis: 0 })
+    );
+    assert_eq!(
+        grid.synthesize(&samples, &[0.0, f32::INFINITY], &mut out),
+        Err(GridError::NonFinite { axis: 1 })
+    );
+    // Out of range clamps to the boundary.
+    let mut edge = Pose::<1>::default();
+    assert_eq!(
+        grid.synthesize(&samples, &[7.5, -3.0], &mut out),
+        Ok(Adjust::Clamped)
+    );
+    assert_eq!(
+        grid.synthesize(&samples, &[4.0, 0.0], &mut edge),
+        Ok(Adjust::None)
+    );
+    assert_eq!(out, edge);
+    // Cells 0..4 along x, 0..2 along y; invalidate the x ≥ 2 half of row y=0.
+    // mask bit c = x + 4y: cells 2, 3 invalid.
+    let mask = [0b1111_0011u8];
+    let grid = Grid::new(&caxes, Some(&mask)).unwrap();
+    let query = grid.query(&[3.5, 0.25]).unwrap();
+    assert_eq!(query.adjust(), Adjust::Projected);
+    // Nearest valid cell to (3.5, 0.25): cell (3, 1) at distance 0.75 (vs 1.5 to (1, 0)).
+    assert_eq!(query.params(), &[3.5, 1.0]);
+    let unmasked = Grid::new(&caxes, None).unwrap();
+    let (pa, qa) = query.segment(&samples, 0).unwrap();
+    let (pb, qb) = unmasked
+        .query(&[3.5, 1.0])
+        .unwrap()
+        .segment(&samples, 0)
+        .unwrap();
+    assert_eq!((pa, qa), (pb, qb));
+    // Inside the valid region nothing changes.
+    assert_eq!(grid.query(&[1.5, 0.5]).unwrap().adjust(), Adjust::None);
+    // Missing samples are an error, not a panic.
+    let short = SliceSamples::new(1, &p[..3], &q[..3]).unwrap();
+    assert_eq!(
+        grid.synthesize(&short, &[1.5, 0.5], &mut out),
+        Err(GridError::MissingSample)
+    );
+    assert_eq!(
+        grid.synthesize(&samples, &[1.5, 0.5], &mut Pose::<0>::default()),
+        Err(GridError::Capacity)
+    );
+}
+
+#[test]
+fn catmull_rom_ignores_samples_only_invalid_cells_touch() {
+    // A Catmull-Rom axis next to an invalid cell uses the linear phantom
+    // instead of the far sample, so garbage there cannot leak in.
+    let line = |x: f64| 1.0 + 0.5 * x;
+    let mut g = scalar_cr_grid(0.0, 1.0, 6, false, line);
+    g.pos[5] = [1e6, 1e6, 1e6];
+    g.rot[5] = [1.0, 0.0, 0.0, 0.0];
+    let (caxes, p, q) = core_grid(&g);
+    let samples = SliceSamples::new(1, &p, &q).unwrap();
+    // Cells 0..5; cell 4 (between samples 4 and 5) invalid.
+    let grid = Grid::new(&caxes, Some(&[0b0_1111])).unwrap();
+    for i in 0..=100 {
+        let x = 2.0 + i as f32 * 0.02;
+        let query = grid.query(&[x]).unwrap();
+        assert_eq!(query.adjust(), Adjust::None);
+        let (pp, qq) = query.segment(&samples, 0).unwrap();
+        assert!(
+            (f64::from(pp.x) - line(f64::from(x))).abs() < 1e-5,
+            "{x}: {pp}"
+        );
+        assert!(
+            r::angle_between(q64(qq), r::axis_angle([0.0, 0.0, 1.0], line(f64::from(x)))) < 5e-5
+        );
+    }
+}
+
+#[test]
+fn slice_samples_layout() {
+    let p: Vec<Vec3> = (0..6).map(|i| Vec3::splat(i as f32)).collect();
+    let q = vec![Quat::IDENTITY; 6];
+    assert!(SliceSamples::new(4, &p, &q).is_none());
+    let s = SliceSamples::new(3, &p, &q).unwrap();
+    assert_eq!((s.segment_count(), s.sample_count()), (3, 2));
+    assert_eq!(s.sample(1, 2).unwrap().0, Vec3::splat(5.0));
+    assert!(s.sample(2, 0).is_none() && s.sample(0, 3).is_none());
+}
+
+// ---------------------------------------------------------------- pose / FK
+
+/// A random tree of `n` segments (parents before children).
+fn random_hierarchy(rng: &mut Rng, n: usize) -> (Vec<u8>, Vec<Vec3>) {
+    let parents = (0..n)
+        .map(|i| {
+            if i == 0 {
+                NO_PARENT
+            } else {
+                (rng.next_u64() % i as u64) as u8
+            }
+        })
+        .collect();
+    let offsets = (0..n)
+        .map(|_| v32([0; 3].map(|_| rng.range(-0.4, 0.4))))
+        .collect();
+    (parents, offsets)
+}
+
+/// Forward kinematics in f64.
+fn fk64(parents: &[u8], offsets: &[Vec3], root: V, local: &[Q]) -> (Vec<V>, Vec<Q>) {
+    let (mut p, mut q): (Vec<V>, Vec<Q>) = (Vec::new(), Vec::new());
+    for i in 0..parents.len() {
+        if parents[i] == NO_PARENT {
+            p.push(root);
+            q.push(local[i]);
+        } else {
+            let j = parents[i] as usize;
+            let o = r::rotate(q[j], v64(offsets[i]));
+            p.push([0, 1, 2].map(|k| p[j][k] + o[k]));
+            q.push(r::mul(q[j], local[i]));
+        }
+    }
+    (p, q)
+}
+
+#[test]
+fn forward_kinematics_matches_f64_and_round_trips() {
+    let mut rng = Rng::new(21);
+    for _ in 0..200 {
+        let n = 1 + (rng.next_u64() % 40) as usize;
+        let (parents, offsets) = random_hierarchy(&mut rng, n);
+        let h = Hierarchy {
+            parents: &parents,
+            offsets: &offsets,
+        };
+        let mut local = LocalPose::<64>::new(n).unwrap();
+        local.root_position = v32([0; 3].map(|_| rng.range(-2.0, 2.0)));
+        let lq: Vec<Q> = (0..n).map(|_| rng.quat()).collect();
+        for (d, q) in local.rotations.iter_mut().zip(&lq) {
+            *d = q32(*q);
+        }
+        let mut world = Pose::<64>::default();
+        pose::forward(&h, &local, &mut world).unwrap();
+        let lq32: Vec<Q> = local.rotations[..n].iter().map(|&q| q64(q)).collect();
+        let (pe, qe) = fk64(&parents, &offsets, v64(local.root_position), &lq32);
+        for i in 0..n {
+            assert!(dist(v64(world.positions[i]), pe[i]) < 1e-5, "{i}");
+            assert!(
+                r::angle_between(q64(world.rotations[i]), qe[i]) < 2e-5,
+                "{i}"
+            );
+        }
+        // to_local(forward(x)) == x
+        let mut back = LocalPose::<64>::default();
+        pose::to_local(&h, &world, &mut back).unwrap();
+        assert_eq!(back.len(), n);
+        assert_eq!(back.root_position, local.root_position);
+        for i in 0..n {
+            assert!(r::angle_between(q64(back.rotations[i]), q64(local.rotations[i])) < 2e-5);
+        }
+        // forward(to_local(p)) == p for a consistent p
+        let mut again = Pose::<64>::default();
+        pose::forward(&h, &back, &mut again).unwrap();
+        for i in 0..n {
+            assert!((again.positions[i] - world.positions[i]).length() < 1e-5);
+        }
+    }
+}
+
+#[test]
+fn enforce_lengths_matches_independent_computation() {
+    let mut rng = Rng::new(22);
+    for _ in 0..200 {
+        let n = 2 + (rng.next_u64() % 30) as usize;
+        let (parents, offsets) = random_hierarchy(&mut rng, n);
+        let h = Hierarchy {
+            parents: &parents,
+            offsets: &offsets,
+        };
+        let mut p = Pose::<32>::new(n).unwrap();
+        for i in 0..n {
+            p.set(
+                i,
+                v32([0; 3].map(|_| rng.range(-1.0, 1.0))),
+                q32(rng.quat()),
+            )
+            .unwrap();
+        }
+        // Reference: new[i] = new[parent] + |offset_i| · unit(old[i] − old[parent]).
+        let old: Vec<V> = p.positions().iter().map(|&v| v64(v)).collect();
+        let mut expect = old.clone();
+        for i in 1..n {
+            let j = parents[i] as usize;
+            let d = [0, 1, 2].map(|k| old[i][k] - old[j][k]);
+            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let l = f64::from(offsets[i].length());
+            expect[i] = [0, 1, 2].map(|k| expect[j][k] + d[k] / len * l);
+        }
+        let rots = p.rotations;
+        pose::enforce_lengths(&h, &mut p).unwrap();
+        assert_eq!(p.rotations, rots);
+        for i in 0..n {
+            assert!(dist(v64(p.positions[i]), expect[i]) < 1e-5, "{i}");
+            if i > 0 {
+                let j = parents[i] as usize;
+                let l = (p.positions[i] - p.positions[j]).length();
+                assert!((l - offsets[i].length()).abs() < 1e-5);
+            }
+        }
+    }
+}
+
+#[test]
+fn pose_math_is_deterministic_scalar_code() {
+    // The same inputs give the same bits through the public entry points used
+    // by host and firmware (guards against accidental use of std/libm paths).
+    let a = math::from_axis_angle(Vec3::new(0.3, -0.2, 0.9), 1.1);
+    let b = math::from_axis_angle(Vec3::new(-0.5, 0.1, 0.2), -0.7);
+    let s1 = math::slerp(a, b, 0.37);
+    let s2 = math::SlerpWeight::new(0.37).apply(a, b);
+    assert_eq!(s1, s2);
+    assert!(r::angle_between(q64(s1), r::slerp(q64(a), q64(b), 0.37)) < 2e-5);
+}

@@ -1,1 +1,1138 @@
-//! `grid` (in progress).
+//! Static interpolation synthesis on a regular grid (Wiley & Hahn 1997).
+//!
+//! # Grid
+//!
+//! A grid has 1 to [`MAX_AXES`] parameter axes (for example hand position
+//! x, y, z, or the cylindrical coordinates of a pedalling foot). Axis `a` has
+//! `count` samples at `min + i·step`, `i = 0..count`. A [`AxisKind::Bounded`]
+//! axis has `count − 1` cells and ends at `min + (count − 1)·step`; a
+//! [`AxisKind::Cyclic`] axis wraps with `period = count·step` (sample `count`
+//! is sample 0 again) and has `count` cells.
+//!
+//! # Samples and their layout
+//!
+//! Every grid point holds a [`Pose`]-like sample (a position and a rotation per
+//! segment), read through the [`Samples`] trait so that tables can be decoded
+//! in place from a flash blob. Sample indices are **row-major with axis 0
+//! fastest**: the sample at grid coordinates `(i0, i1, …)` has index
+//! `i0 + count0·(i1 + count1·(i2 + …))`. [`SliceSamples`] stores them as
+//! `[sample][segment]` slices: element `sample·segments + segment`.
+//!
+//! Cells are numbered the same way over the per-axis cell counts; the
+//! optional validity mask holds one bit per cell (bit `c % 8` of byte `c / 8`,
+//! 1 = valid).
+//!
+//! # Query: coefficients once, then every segment
+//!
+//! [`Grid::query`] finds the cell by one multiplication by the precomputed
+//! `1/step` per axis (no search) and computes, once, everything that does not
+//! depend on the segment: the indices of the window samples, the per-axis
+//! interpolation coefficients (with the fast-slerp polynomial already folded,
+//! see [`SlerpWeight`]) and the tensor-product position weights. [`Query::pose`]
+//! then applies them to every segment; [`Query::segment`] does one segment.
+//!
+//! # The interpolation tree
+//!
+//! With `p` linear axes the window has `2^p` samples and the result is the
+//! W&H binary tree of `2^p − 1` interpolations: all pairs along axis 0 first
+//! (coefficient `u = (t − l)/(h − l)`), then the results along axis 1, and so
+//! on. Rotations use the core's fast slerp ([`math::slerp`], within 6.7e-6 rad
+//! of exact slerp) along the shortest arc. Positions are linear in the
+//! samples, so the same tree is evaluated as one weighted sum with the
+//! products of the per-axis weights (identical in exact arithmetic, fewer
+//! operations); at grid points the weights are exactly 0 and 1, so samples
+//! come back bit for bit.
+//!
+//! A [`Interp::CatmullRom`] axis uses the 4 samples `k−1, k, k+1, k+2` around
+//! cell `k` (so the window is 4 wide along that axis) and interpolates
+//! between the middle two:
+//! - positions: uniform Catmull-Rom weights
+//!   `w(−1) = (−s³ + 2s² − s)/2`, `w(0) = (3s³ − 5s² + 2)/2`,
+//!   `w(1) = (−3s³ + 4s² + s)/2`, `w(2) = (s³ − s²)/2`. The tangent at a
+//!   sample is the central difference, which is exact for quadratics, so
+//!   uniform Catmull-Rom reproduces polynomials of degree ≤ 2 exactly in
+//!   interior cells (not cubics: the central difference of `x³` is `3x² + 1`);
+//! - rotations: the Barry–Goldman pyramid (the Neville-like form of
+//!   Catmull-Rom) with every `lerp` replaced by a slerp: level 1
+//!   `A1 = slerp(P−1, P0, s+1)`, `A2 = slerp(P0, P1, s)`,
+//!   `A3 = slerp(P1, P2, s−1)`; level 2 `B1 = slerp(A1, A2, (s+1)/2)`,
+//!   `B2 = slerp(A2, A3, s/2)`; result `slerp(B1, B2, s)`. The extrapolating
+//!   slerps are computed exactly as `slerp(P0, reflect(P−1, P0), s)` and
+//!   `slerp(P1, reflect(P2, P1), 1−s)` (see [`math::reflect`]), so every fast
+//!   slerp runs with its parameter in `[0, 1]`. This is a proper spherical
+//!   curve (it stays on the unit sphere, is `C¹`, interpolates the samples and
+//!   is sign-independent); on a great circle it reduces to Catmull-Rom of the
+//!   angle, so uniform rotation about a fixed axis is reproduced exactly. It
+//!   was chosen over squad because it needs no quaternion log/exp per segment
+//!   (6 slerps and 2 reflections), and over Shoemake's Bézier construction
+//!   because it needs fewer slerps.
+//!
+//! At the ends of a bounded Catmull-Rom axis (and next to an invalid cell) the
+//! missing outer sample is replaced by a linear phantom, `P−1 = 2P0 − P1`
+//! (`reflect(P1, P0)` for rotations); then `A1 = A2` exactly, so the end
+//! cells reproduce linear data (and uniform rotations) but not quadratics.
+//! On cyclic axes the window wraps. Linear and Catmull-Rom axes can be mixed;
+//! each axis is reduced in order, axis 0 first.
+//!
+//! # Parameters out of range, invalid cells, NaN
+//!
+//! - NaN or infinite parameters are rejected with [`GridError::NonFinite`].
+//! - Bounded axes clamp to `[min, max]` ([`Adjust::Clamped`]). Cyclic axes
+//!   wrap (never clamped).
+//! - Parameters within `4ε·(1 + |u| + |min|/step)` cells of a grid point
+//!   (`u` in cell units, `ε = 2^-23`) snap to it, so grid points computed in
+//!   `f32` as `min + i·step` return their sample exactly. The tolerance is a
+//!   few times the rounding error of the parameter itself, so snapping never
+//!   moves a query by more than its own `f32` precision (a few ulp).
+//! - A point on the boundary of a valid cell is accepted as is.
+//! - If the cell found is marked invalid, the query is projected to the
+//!   nearest point of the nearest valid cell, distance measured in cell units
+//!   (each axis divided by its step; wrapped on cyclic axes), ties to the
+//!   lowest cell index ([`Adjust::Projected`]). This is a scan over all cells
+//!   (`O(cells · axes)`), paid only while a query is outside the valid region.
+//!   No valid cell at all gives [`GridError::NoValidCell`].
+//! - [`Query::adjust`] reports what happened; [`Query::params`] gives the
+//!   parameters actually used.
+
+use glam::{Quat, Vec3};
+
+use crate::math::{self, SlerpWeight};
+use crate::pose::Pose;
+
+/// Most axes a grid may have.
+pub const MAX_AXES: usize = 6;
+/// Most samples in one interpolation window (a linear axis contributes a
+/// factor 2, a Catmull-Rom axis 4): six linear axes, or three Catmull-Rom
+/// axes and one linear, or one Catmull-Rom and five linear.
+pub const MAX_WINDOW: usize = 128;
+
+/// How an axis continues past its ends.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AxisKind {
+    /// `count` samples from `min` to `min + (count − 1)·step`; outside, clamp.
+    Bounded,
+    /// Periodic with `period = count·step` (checked to 1e-5 relative).
+    Cyclic {
+        /// The period in parameter units.
+        period: f32,
+    },
+}
+
+/// Interpolation along an axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Interp {
+    /// Lerp / slerp between the two samples around the parameter.
+    Linear,
+    /// Catmull-Rom over four samples (see the module doc).
+    CatmullRom,
+}
+
+/// One grid axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Axis {
+    /// Parameter value of sample 0.
+    pub min: f32,
+    /// Spacing between samples (> 0).
+    pub step: f32,
+    /// Number of samples (≥ 2).
+    pub count: u32,
+    /// Bounded or cyclic.
+    pub kind: AxisKind,
+    /// Linear or Catmull-Rom.
+    pub interp: Interp,
+}
+
+impl Axis {
+    /// A bounded linear axis.
+    #[must_use]
+    pub const fn linear(min: f32, step: f32, count: u32) -> Self {
+        Self {
+            min,
+            step,
+            count,
+            kind: AxisKind::Bounded,
+            interp: Interp::Linear,
+        }
+    }
+
+    /// Number of cells (`count − 1` bounded, `count` cyclic).
+    #[must_use]
+    pub fn cells(&self) -> u32 {
+        match self.kind {
+            AxisKind::Bounded => self.count.saturating_sub(1),
+            AxisKind::Cyclic { .. } => self.count,
+        }
+    }
+
+    fn window(&self) -> usize {
+        match self.interp {
+            Interp::Linear => 2,
+            Interp::CatmullRom => 4,
+        }
+    }
+}
+
+/// Why a grid or a query was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GridError {
+    /// No axis, or more than [`MAX_AXES`].
+    AxisCount,
+    /// An axis has fewer than 2 samples, a non-finite `min`, a non-positive or
+    /// non-finite `step`, or a period that is not `count·step`.
+    BadAxis {
+        /// The offending axis.
+        axis: u8,
+    },
+    /// The interpolation window would exceed [`MAX_WINDOW`] samples.
+    WindowTooLarge,
+    /// The number of samples or cells does not fit in `u32`.
+    TooManySamples,
+    /// The validity mask is shorter than one bit per cell.
+    MaskLength,
+    /// The number of parameters differs from the number of axes.
+    ParamCount,
+    /// A parameter is NaN or infinite.
+    NonFinite {
+        /// The offending axis.
+        axis: u8,
+    },
+    /// Every cell is marked invalid.
+    NoValidCell,
+    /// The sample source lacks a sample the grid needs.
+    MissingSample,
+    /// The sample source has more segments than the output pose holds.
+    Capacity,
+}
+
+/// What a query did to its parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Adjust {
+    /// Used as given (cyclic wrapping and grid-point snapping included).
+    None,
+    /// At least one bounded axis was clamped to its range.
+    Clamped,
+    /// The cell was invalid; moved to the nearest valid cell.
+    Projected,
+}
+
+/// A read-only source of grid samples (see the module doc for the layout).
+pub trait Samples {
+    /// Segments per sample.
+    fn segment_count(&self) -> usize;
+    /// Number of samples available.
+    fn sample_count(&self) -> usize;
+    /// Position and rotation of `segment` in sample `index`.
+    fn sample(&self, index: usize, segment: usize) -> Option<(Vec3, Quat)>;
+}
+
+/// In-memory samples: `[sample][segment]` slices (host, tests).
+#[derive(Clone, Copy, Debug)]
+pub struct SliceSamples<'a> {
+    segments: usize,
+    positions: &'a [Vec3],
+    rotations: &'a [Quat],
+}
+
+impl<'a> SliceSamples<'a> {
+    /// Wraps the slices; `None` if their lengths differ or are not a multiple
+    /// of `segments` (or `segments` is 0).
+    #[must_use]
+    pub fn new(segments: usize, positions: &'a [Vec3], rotations: &'a [Quat]) -> Option<Self> {
+        let ok = segments > 0
+            && positions.len() == rotations.len()
+            && positions.len().checked_rem(segments) == Some(0);
+        ok.then_some(Self {
+            segments,
+            positions,
+            rotations,
+        })
+    }
+}
+
+impl Samples for SliceSamples<'_> {
+    #[inline]
+    fn segment_count(&self) -> usize {
+        self.segments
+    }
+
+    #[inline]
+    fn sample_count(&self) -> usize {
+        self.positions.len().checked_div(self.segments).unwrap_or(0)
+    }
+
+    #[inline]
+    fn sample(&self, index: usize, segment: usize) -> Option<(Vec3, Quat)> {
+        if segment >= self.segments {
+            return None;
+        }
+        let i = index.checked_mul(self.segments)?.checked_add(segment)?;
+        Some((*self.positions.get(i)?, *self.rotations.get(i)?))
+    }
+}
+
+/// A regular grid in parameter space with an optional cell-validity mask.
+#[derive(Clone, Copy, Debug)]
+pub struct Grid<'a> {
+    axes: [Axis; MAX_AXES],
+    axis_count: usize,
+    inv_step: [f32; MAX_AXES],
+    sample_stride: [u32; MAX_AXES],
+    cell_stride: [u32; MAX_AXES],
+    samples: u32,
+    cells: u32,
+    window: usize,
+    valid: Option<&'a [u8]>,
+}
+
+/// Per-axis coefficients of a query.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum AxisWeights {
+    /// Slerp weight `t` between the two window samples.
+    Linear(SlerpWeight),
+    /// Catmull-Rom pyramid (see the module doc).
+    Cubic(Cubic),
+}
+
+/// Spherical Catmull-Rom coefficients for one parameter `s`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Cubic {
+    s: SlerpWeight,
+    one_minus_s: SlerpWeight,
+    half_s_plus: SlerpWeight,
+    half_s: SlerpWeight,
+    /// `P−1` is the linear phantom (`A1 = A2`).
+    lo_phantom: bool,
+    /// `P2` is the linear phantom (`A3 = A2`).
+    hi_phantom: bool,
+}
+
+impl Cubic {
+    fn new(s: f32, lo_phantom: bool, hi_phantom: bool) -> Self {
+        Self {
+            s: SlerpWeight::new(s),
+            one_minus_s: SlerpWeight::new(1.0 - s),
+            half_s_plus: SlerpWeight::new(0.5 * (s + 1.0)),
+            half_s: SlerpWeight::new(0.5 * s),
+            lo_phantom,
+            hi_phantom,
+        }
+    }
+
+    /// Catmull-Rom position weights for `P−1, P0, P1, P2`, phantoms folded in.
+    fn position_weights(&self) -> [f32; 4] {
+        let s = self.s.t();
+        let (s2, s3) = (s * s, s * s * s);
+        let mut w = [
+            0.5 * (-s3 + 2.0 * s2 - s),
+            0.5 * (3.0 * s3 - 5.0 * s2 + 2.0),
+            0.5 * (-3.0 * s3 + 4.0 * s2 + s),
+            0.5 * (s3 - s2),
+        ];
+        if self.lo_phantom {
+            // P−1 = 2·P0 − P1
+            w = [0.0, w[1] + 2.0 * w[0], w[2] - w[0], w[3]];
+        }
+        if self.hi_phantom {
+            // P2 = 2·P1 − P0
+            w = [w[0], w[1] - w[3], w[2] + 2.0 * w[3], 0.0];
+        }
+        w
+    }
+
+    /// Spherical Catmull-Rom of four rotations (exact endpoints).
+    #[inline]
+    fn rotation(&self, p: [Quat; 4]) -> Quat {
+        let [p0, p1, p2, p3] = p;
+        let s = self.s.t();
+        if s <= 0.0 {
+            return p1;
+        }
+        if s >= 1.0 {
+            return p2;
+        }
+        let a2 = self.s.apply(p1, p2);
+        let a1 = if self.lo_phantom {
+            a2
+        } else {
+            self.s.apply(p1, math::reflect(p0, p1))
+        };
+        let a3 = if self.hi_phantom {
+            a2
+        } else {
+            self.one_minus_s.apply(p2, math::reflect(p3, p2))
+        };
+        let b1 = self.half_s_plus.apply(a1, a2);
+        let b2 = self.half_s.apply(a2, a3);
+        self.s.apply(b1, b2)
+    }
+}
+
+/// A located query: window sample indices and coefficients, computed once
+/// and applied to every segment (see the module doc).
+#[derive(Clone, Copy, Debug)]
+pub struct Query {
+    window: [u32; MAX_WINDOW],
+    weights: [f32; MAX_WINDOW],
+    len: usize,
+    axes: [AxisWeights; MAX_AXES],
+    axis_count: usize,
+    params: [f32; MAX_AXES],
+    adjust: Adjust,
+}
+
+/// Where a query landed along one axis.
+#[derive(Clone, Copy, Debug)]
+struct Located {
+    /// Cell index along the axis.
+    cell: u32,
+    /// Position inside the cell, `[0, 1]`.
+    t: f32,
+}
+
+impl<'a> Grid<'a> {
+    /// Builds and validates a grid. `valid`, if given, needs one bit per cell.
+    pub fn new(axes: &[Axis], valid: Option<&'a [u8]>) -> Result<Self, GridError> {
+        if axes.is_empty() || axes.len() > MAX_AXES {
+            return Err(GridError::AxisCount);
+        }
+        let mut g = Grid {
+            axes: [Axis::linear(0.0, 1.0, 2); MAX_AXES],
+            axis_count: axes.len(),
+            inv_step: [1.0; MAX_AXES],
+            sample_stride: [0; MAX_AXES],
+            cell_stride: [0; MAX_AXES],
+            samples: 1,
+            cells: 1,
+            window: 1,
+            valid,
+        };
+        let fields = g
+            .axes
+            .iter_mut()
+            .zip(&mut g.inv_step)
+            .zip(&mut g.sample_stride)
+            .zip(&mut g.cell_stride);
+        for (i, ((((slot, inv), ss), cs), axis)) in fields.zip(axes).enumerate() {
+            check_axis(axis).map_err(|()| GridError::BadAxis { axis: i as u8 })?;
+            *slot = *axis;
+            *inv = 1.0 / axis.step;
+            *ss = g.samples;
+            *cs = g.cells;
+            g.samples = g
+                .samples
+                .checked_mul(axis.count)
+                .ok_or(GridError::TooManySamples)?;
+            g.cells = g
+                .cells
+                .checked_mul(axis.cells())
+                .ok_or(GridError::TooManySamples)?;
+            g.window = g.window.saturating_mul(axis.window());
+        }
+        if g.window > MAX_WINDOW {
+            return Err(GridError::WindowTooLarge);
+        }
+        if let Some(mask) = valid
+            && (mask.len() as u64) * 8 < u64::from(g.cells)
+        {
+            return Err(GridError::MaskLength);
+        }
+        Ok(g)
+    }
+
+    /// The axes.
+    #[must_use]
+    pub fn axes(&self) -> &[Axis] {
+        self.axes.get(..self.axis_count).unwrap_or(&[])
+    }
+
+    /// Number of grid samples (product of the axis counts).
+    #[must_use]
+    pub fn sample_count(&self) -> usize {
+        self.samples as usize
+    }
+
+    /// Number of cells (product of the axis cell counts).
+    #[must_use]
+    pub fn cell_count(&self) -> usize {
+        self.cells as usize
+    }
+
+    /// Whether cell `index` is valid (always true without a mask).
+    #[must_use]
+    pub fn cell_valid(&self, index: usize) -> bool {
+        match self.valid {
+            None => index < self.cell_count(),
+            Some(mask) => {
+                index < self.cell_count()
+                    && mask
+                        .get(index / 8)
+                        .is_some_and(|b| b >> (index % 8) & 1 == 1)
+            }
+        }
+    }
+
+    /// Locates `params` (one per axis) and computes the interpolation
+    /// coefficients (see the module doc for the clamping/projection policy).
+    pub fn query(&self, params: &[f32]) -> Result<Query, GridError> {
+        if params.len() != self.axis_count {
+            return Err(GridError::ParamCount);
+        }
+        let mut u = [0.0f32; MAX_AXES];
+        let mut adjust = Adjust::None;
+        for (i, ((ui, &p), axis)) in u.iter_mut().zip(params).zip(self.axes()).enumerate() {
+            if !p.is_finite() {
+                return Err(GridError::NonFinite { axis: i as u8 });
+            }
+            let (v, clamped) = to_cell_units(axis, self.inv_step.get(i).copied().unwrap_or(1.0), p);
+            if clamped {
+                adjust = Adjust::Clamped;
+            }
+            *ui = v;
+        }
+        let mut loc = [Located { cell: 0, t: 0.0 }; MAX_AXES];
+        for ((l, &ui), axis) in loc.iter_mut().zip(&u).zip(self.axes()) {
+            *l = locate(axis, ui);
+        }
+        if !self.cell_valid(self.cell_index(&loc) as usize) {
+            let (moved, d2) = self.project(&u)?;
+            loc = moved;
+            // On the boundary of a valid cell: not a projection.
+            if d2 > 0.0 {
+                adjust = Adjust::Projected;
+            }
+        }
+        Ok(self.build_query(&loc, adjust))
+    }
+
+    /// Convenience: [`Grid::query`] then [`Query::pose`]; returns the adjustment.
+    pub fn synthesize<S: Samples, const N: usize>(
+        &self,
+        samples: &S,
+        params: &[f32],
+        out: &mut Pose<N>,
+    ) -> Result<Adjust, GridError> {
+        let q = self.query(params)?;
+        q.pose(samples, out)?;
+        Ok(q.adjust())
+    }
+
+    fn cell_index(&self, loc: &[Located; MAX_AXES]) -> u32 {
+        loc.iter()
+            .zip(&self.cell_stride)
+            .take(self.axis_count)
+            .fold(0u32, |acc, (l, &s)| {
+                acc.wrapping_add(l.cell.wrapping_mul(s))
+            })
+    }
+
+    /// Nearest point of the nearest valid cell to `u` (cell units).
+    fn project(&self, u: &[f32; MAX_AXES]) -> Result<([Located; MAX_AXES], f32), GridError> {
+        let mut best: Option<(f32, u32)> = None;
+        for c in 0..self.cells {
+            if !self.cell_valid(c as usize) {
+                continue;
+            }
+            let mut d2 = 0.0f32;
+            let mut rest = c;
+            for (axis, &ui) in self.axes().iter().zip(u) {
+                let n = axis.cells();
+                let k = rest.checked_rem(n).unwrap_or(0);
+                rest = rest.checked_div(n).unwrap_or(0);
+                let (d, _) = nearest_in_cell(axis, ui, k);
+                d2 += d * d;
+            }
+            if best.is_none_or(|(bd, _)| d2 < bd) {
+                best = Some((d2, c));
+            }
+        }
+        let (d2, c) = best.ok_or(GridError::NoValidCell)?;
+        let mut loc = [Located { cell: 0, t: 0.0 }; MAX_AXES];
+        let mut rest = c;
+        for ((l, axis), &ui) in loc.iter_mut().zip(self.axes()).zip(u) {
+            let n = axis.cells();
+            let k = rest.checked_rem(n).unwrap_or(0);
+            rest = rest.checked_div(n).unwrap_or(0);
+            let (_, t) = nearest_in_cell(axis, ui, k);
+            *l = Located { cell: k, t };
+        }
+        Ok((loc, d2))
+    }
+
+    fn build_query(&self, loc: &[Located; MAX_AXES], adjust: Adjust) -> Query {
+        let mut q = Query {
+            window: [0; MAX_WINDOW],
+            weights: [0.0; MAX_WINDOW],
+            len: 1,
+            axes: [AxisWeights::Linear(SlerpWeight::new(0.0)); MAX_AXES],
+            axis_count: self.axis_count,
+            params: [0.0; MAX_AXES],
+            adjust,
+        };
+        if let Some(w) = q.weights.first_mut() {
+            *w = 1.0;
+        }
+        for (a, (((axis, l), aw), param)) in self
+            .axes()
+            .iter()
+            .zip(loc)
+            .zip(&mut q.axes)
+            .zip(&mut q.params)
+            .enumerate()
+        {
+            let (idx, w, weights) = self.axis_window(a, loc, axis, l);
+            *aw = weights;
+            *param = axis_param(axis, l);
+            let stride = self.sample_stride.get(a).copied().unwrap_or(0);
+            expand(
+                &mut q.window,
+                &mut q.weights,
+                &mut q.len,
+                idx.get(..axis.window()).unwrap_or(&[]),
+                &w,
+                stride,
+            );
+        }
+        q
+    }
+
+    /// Sample indices along axis `a` (window order), position weights and
+    /// rotation coefficients.
+    fn axis_window(
+        &self,
+        a: usize,
+        loc: &[Located; MAX_AXES],
+        axis: &Axis,
+        l: &Located,
+    ) -> ([u32; 4], [f32; 4], AxisWeights) {
+        let n = axis.count;
+        let k = l.cell;
+        let cyclic = matches!(axis.kind, AxisKind::Cyclic { .. });
+        let next = |i: u32| {
+            if i + 1 >= n {
+                if cyclic { 0 } else { i }
+            } else {
+                i + 1
+            }
+        };
+        match axis.interp {
+            Interp::Linear => {
+                let w = SlerpWeight::new(l.t);
+                (
+                    [k, next(k), 0, 0],
+                    [1.0 - w.t(), w.t(), 0.0, 0.0],
+                    AxisWeights::Linear(w),
+                )
+            }
+            Interp::CatmullRom => {
+                let k1 = next(k);
+                let (has_lo, has_hi) = (cyclic || k > 0, cyclic || k + 2 < n);
+                let lo_ok = has_lo && self.neighbour_valid(a, loc, false);
+                let hi_ok = has_hi && self.neighbour_valid(a, loc, true);
+                let km1 = if lo_ok {
+                    if k == 0 { n - 1 } else { k - 1 }
+                } else {
+                    k
+                };
+                let k2 = if hi_ok { next(k1) } else { k1 };
+                let c = Cubic::new(l.t, !lo_ok, !hi_ok);
+                (
+                    [km1, k, k1, k2],
+                    c.position_weights(),
+                    AxisWeights::Cubic(c),
+                )
+            }
+        }
+    }
+
+    /// Whether the cell next to the located one along axis `a` is valid.
+    fn neighbour_valid(&self, a: usize, loc: &[Located; MAX_AXES], up: bool) -> bool {
+        if self.valid.is_none() {
+            return true;
+        }
+        let mut moved = *loc;
+        let (Some(l), Some(axis)) = (moved.get_mut(a), self.axes().get(a)) else {
+            return false;
+        };
+        let n = axis.cells();
+        l.cell = match (up, l.cell) {
+            (true, c) if c + 1 < n => c + 1,
+            (true, _) => 0,
+            (false, 0) => n.saturating_sub(1),
+            (false, c) => c - 1,
+        };
+        self.cell_valid(self.cell_index(&moved) as usize)
+    }
+}
+
+fn check_axis(a: &Axis) -> Result<(), ()> {
+    let ok = a.count >= 2 && a.min.is_finite() && a.step.is_finite() && a.step > 0.0;
+    let period_ok = match a.kind {
+        AxisKind::Bounded => true,
+        AxisKind::Cyclic { period } => {
+            let expect = a.count as f32 * a.step;
+            math::abs(period - expect) <= 1e-5 * expect
+        }
+    };
+    if ok && period_ok { Ok(()) } else { Err(()) }
+}
+
+/// Parameter in cell units along the axis (wrapped or clamped), and whether
+/// it was clamped.
+fn to_cell_units(axis: &Axis, inv_step: f32, p: f32) -> (f32, bool) {
+    let u = (p - axis.min) * inv_step;
+    let n = axis.count as f32;
+    // Rounding of p = min + i·step and of the line above is below
+    // ε·(|min|/step + 2|u|) cells; snap within four times that.
+    let tol = 4.0 * f32::EPSILON * (1.0 + math::abs(u) + math::abs(axis.min) * inv_step);
+    match axis.kind {
+        AxisKind::Bounded => {
+            let c = snap(u.clamp(0.0, n - 1.0), tol);
+            (c, math::abs(c - u) > tol)
+        }
+        AxisKind::Cyclic { .. } => {
+            let w = u - n * math::floor(u / n);
+            let w = snap(if w >= n || w < 0.0 { 0.0 } else { w }, tol);
+            (if w >= n { 0.0 } else { w }, false)
+        }
+    }
+}
+
+/// Snaps `u` to the nearest integer when within `tol`.
+fn snap(u: f32, tol: f32) -> f32 {
+    let r = math::floor(u + 0.5);
+    if math::abs(u - r) <= tol { r } else { u }
+}
+
+/// Cell and in-cell coordinate for `u` (cell units, already in range).
+fn locate(axis: &Axis, u: f32) -> Located {
+    let cells = axis.cells();
+    let k = math::floor(u);
+    // Saturating float→int; the last sample of a bounded axis is t = 1 of the last cell.
+    let mut cell = k as u32;
+    let mut t = u - k;
+    if cell >= cells {
+        match axis.kind {
+            AxisKind::Bounded => {
+                cell = cells.saturating_sub(1);
+                t = u - cell as f32;
+            }
+            AxisKind::Cyclic { .. } => {
+                cell = 0;
+                t = 0.0;
+            }
+        }
+    }
+    Located {
+        cell,
+        t: t.clamp(0.0, 1.0),
+    }
+}
+
+/// Distance (cell units) from `u` to cell `k` along the axis, and the
+/// in-cell coordinate of the nearest point.
+fn nearest_in_cell(axis: &Axis, u: f32, k: u32) -> (f32, f32) {
+    let lo = k as f32;
+    let one = |v: f32| {
+        let c = v.clamp(lo, lo + 1.0);
+        (math::abs(v - c), c - lo)
+    };
+    match axis.kind {
+        AxisKind::Bounded => one(u),
+        AxisKind::Cyclic { .. } => {
+            let n = axis.count as f32;
+            let (a, b, c) = (one(u), one(u - n), one(u + n));
+            let best = if b.0 < a.0 { b } else { a };
+            if c.0 < best.0 { c } else { best }
+        }
+    }
+}
+
+/// The parameter value a located query stands for.
+fn axis_param(axis: &Axis, l: &Located) -> f32 {
+    let v = axis.min + (l.cell as f32 + l.t) * axis.step;
+    match axis.kind {
+        AxisKind::Cyclic { period } if v >= axis.min + period => v - period,
+        _ => v,
+    }
+}
+
+/// Tensor-expands the window by one axis: every existing entry is repeated
+/// for each of the axis' samples (the new axis varies slowest).
+fn expand(
+    window: &mut [u32; MAX_WINDOW],
+    weights: &mut [f32; MAX_WINDOW],
+    len: &mut usize,
+    idx: &[u32],
+    w: &[f32; 4],
+    stride: u32,
+) {
+    let old = *len;
+    let new = old.saturating_mul(idx.len()).min(MAX_WINDOW);
+    // Fill from the back so the old entries are read before being overwritten.
+    for j in (0..new).rev() {
+        let (Some(digit), Some(base)) = (j.checked_div(old), j.checked_rem(old)) else {
+            continue;
+        };
+        let (bi, bw) = (
+            window.get(base).copied().unwrap_or(0),
+            weights.get(base).copied().unwrap_or(0.0),
+        );
+        let (ai, aw) = (
+            idx.get(digit).copied().unwrap_or(0),
+            w.get(digit).copied().unwrap_or(0.0),
+        );
+        if let (Some(wi), Some(ww)) = (window.get_mut(j), weights.get_mut(j)) {
+            *wi = bi.wrapping_add(ai.wrapping_mul(stride));
+            *ww = bw * aw;
+        }
+    }
+    *len = new;
+}
+
+impl Query {
+    /// What the query did to its parameters.
+    #[must_use]
+    pub fn adjust(&self) -> Adjust {
+        self.adjust
+    }
+
+    /// The parameters actually used (after clamping, wrapping, projection).
+    #[must_use]
+    pub fn params(&self) -> &[f32] {
+        self.params.get(..self.axis_count).unwrap_or(&[])
+    }
+
+    /// Sample indices of the window (axis 0 fastest).
+    #[must_use]
+    pub fn window(&self) -> &[u32] {
+        self.window.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Position weight of each window sample (tensor product of the axis weights).
+    #[must_use]
+    pub fn weights(&self) -> &[f32] {
+        self.weights.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Interpolates every segment of the samples into `out` (`out.count` is set
+    /// to the source's segment count).
+    ///
+    /// Segments are processed in blocks (as many as fit `MAX_WINDOW` window
+    /// entries, 16 for a trilinear window) level by level, so the slerps of
+    /// different segments are independent and pipeline well; the arithmetic
+    /// per segment is exactly that of [`Query::segment`].
+    pub fn pose<S: Samples, const N: usize>(
+        &self,
+        samples: &S,
+        out: &mut Pose<N>,
+    ) -> Result<(), GridError> {
+        let n = samples.segment_count();
+        if n > N {
+            return Err(GridError::Capacity);
+        }
+        out.count = n;
+        let block = MAX_WINDOW.checked_div(self.len).unwrap_or(1).max(1);
+        let mut buf = [Quat::IDENTITY; MAX_WINDOW];
+        let mut first = 0;
+        while first < n {
+            let count = block.min(n - first);
+            let positions = out
+                .positions
+                .get_mut(first..first + count)
+                .unwrap_or(&mut []);
+            self.fetch(samples, first, block, positions, &mut buf)?;
+            self.reduce(&mut buf, block, count);
+            let rotations = out
+                .rotations
+                .get_mut(first..first + count)
+                .unwrap_or(&mut []);
+            for (r, q) in rotations.iter_mut().zip(buf.iter()) {
+                *r = *q;
+            }
+            first += count;
+        }
+        Ok(())
+    }
+
+    /// Interpolates one segment.
+    pub fn segment<S: Samples>(
+        &self,
+        samples: &S,
+        segment: usize,
+    ) -> Result<(Vec3, Quat), GridError> {
+        let mut buf = [Quat::IDENTITY; MAX_WINDOW];
+        let mut pos = [Vec3::ZERO];
+        self.fetch(samples, segment, 1, &mut pos, &mut buf)?;
+        self.reduce(&mut buf, 1, 1);
+        Ok((pos[0], buf[0]))
+    }
+
+    /// Reads the window of segments `first..first + positions.len()`:
+    /// positions as the weighted sum, rotations into `buf[j·block + b]`.
+    #[inline]
+    fn fetch<S: Samples>(
+        &self,
+        samples: &S,
+        first: usize,
+        block: usize,
+        positions: &mut [Vec3],
+        buf: &mut [Quat; MAX_WINDOW],
+    ) -> Result<(), GridError> {
+        for (b, pos) in positions.iter_mut().enumerate() {
+            let mut acc = Vec3::ZERO;
+            for (j, (&index, &w)) in self.window().iter().zip(self.weights()).enumerate() {
+                let (p, q) = samples
+                    .sample(index as usize, first + b)
+                    .ok_or(GridError::MissingSample)?;
+                acc += p * w;
+                if let Some(slot) = buf.get_mut(j * block + b) {
+                    *slot = q;
+                }
+            }
+            *pos = acc;
+        }
+        Ok(())
+    }
+
+    /// Runs the rotation tree on `count` segments laid out `[window][block]`;
+    /// the results end up in `buf[0..count]`.
+    #[inline]
+    fn reduce(&self, buf: &mut [Quat; MAX_WINDOW], block: usize, count: usize) {
+        let mut len = self.len;
+        for axis in self.axes.iter().take(self.axis_count) {
+            len = match axis {
+                AxisWeights::Linear(w) => reduce_linear(buf, len, block, count, w),
+                AxisWeights::Cubic(c) => reduce_cubic(buf, len, block, count, c),
+            };
+        }
+    }
+}
+
+/// Slerps adjacent pairs in place: `g[i] = slerp(g[2i], g[2i+1])` for each
+/// window group `g` (stride `block`) and each of the `count` segments.
+#[inline]
+fn reduce_linear(
+    buf: &mut [Quat; MAX_WINDOW],
+    len: usize,
+    block: usize,
+    count: usize,
+    w: &SlerpWeight,
+) -> usize {
+    let half = len / 2;
+    for i in 0..half {
+        for b in 0..count {
+            let (ia, ib) = (2 * i * block + b, (2 * i + 1) * block + b);
+            if let (Some(&a), Some(&c)) = (buf.get(ia), buf.get(ib))
+                && let Some(slot) = buf.get_mut(i * block + b)
+            {
+                *slot = w.apply(a, c);
+            }
+        }
+    }
+    half
+}
+
+/// Spherical Catmull-Rom over groups of four, in place (layout as above).
+#[inline]
+fn reduce_cubic(
+    buf: &mut [Quat; MAX_WINDOW],
+    len: usize,
+    block: usize,
+    count: usize,
+    c: &Cubic,
+) -> usize {
+    let quarter = len / 4;
+    for i in 0..quarter {
+        for b in 0..count {
+            let at = |k: usize| {
+                buf.get((4 * i + k) * block + b)
+                    .copied()
+                    .unwrap_or(Quat::IDENTITY)
+            };
+            let group = [at(0), at(1), at(2), at(3)];
+            if let Some(slot) = buf.get_mut(i * block + b) {
+                *slot = c.rotation(group);
+            }
+        }
+    }
+    quarter
+}
+
+/// Limits how fast parameters may change (units per second per axis; cyclic
+/// axes move the short way round). Keeps the synthesized pose from jumping
+/// when a tracker glitches.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParamLimiter {
+    rates: [f32; MAX_AXES],
+    periods: [f32; MAX_AXES],
+    state: [f32; MAX_AXES],
+    count: usize,
+    primed: bool,
+}
+
+impl ParamLimiter {
+    /// A limiter with `rates[a]` units/s on each axis; `periods[a] > 0` marks a
+    /// cyclic axis (0 = not cyclic). Extra entries beyond [`MAX_AXES`] are ignored.
+    #[must_use]
+    pub fn new(rates: &[f32], periods: &[f32]) -> Self {
+        let mut s = Self {
+            rates: [0.0; MAX_AXES],
+            periods: [0.0; MAX_AXES],
+            state: [0.0; MAX_AXES],
+            count: 0,
+            primed: false,
+        };
+        for (d, &r) in s.rates.iter_mut().zip(rates) {
+            *d = math::abs(r);
+            s.count += 1;
+        }
+        for (d, &p) in s.periods.iter_mut().zip(periods) {
+            *d = p;
+        }
+        s
+    }
+
+    /// Moves the state towards `target` by at most `rate·dt` per axis and
+    /// returns it. The first call (or after [`ParamLimiter::reset`]) jumps to
+    /// the target. Non-finite targets keep the previous value.
+    pub fn update(&mut self, target: &[f32], dt: f32) -> &[f32] {
+        let first = !self.primed;
+        self.primed = true;
+        let dt = if dt.is_finite() && dt > 0.0 { dt } else { 0.0 };
+        for (((s, &t), &r), &p) in self
+            .state
+            .iter_mut()
+            .zip(target)
+            .zip(&self.rates)
+            .zip(&self.periods)
+        {
+            if !t.is_finite() {
+                continue;
+            }
+            if first {
+                *s = t;
+                continue;
+            }
+            let mut d = t - *s;
+            if p > 0.0 {
+                d -= p * math::floor(d / p + 0.5);
+            }
+            let m = r * dt;
+            *s += d.clamp(-m, m);
+            if p > 0.0 {
+                *s -= p * math::floor(*s / p);
+            }
+        }
+        self.state.get(..self.count).unwrap_or(&[])
+    }
+
+    /// Forgets the state; the next update jumps to its target.
+    pub fn reset(&mut self) {
+        self.primed = false;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn axis(min: f32, step: f32, count: u32) -> Axis {
+        Axis::linear(min, step, count)
+    }
+
+    #[test]
+    fn validation() {
+        assert_eq!(Grid::new(&[], None).err(), Some(GridError::AxisCount));
+        assert_eq!(
+            Grid::new(&[axis(0.0, 1.0, 1)], None).err(),
+            Some(GridError::BadAxis { axis: 0 })
+        );
+        assert_eq!(
+            Grid::new(&[axis(0.0, 1.0, 2), axis(0.0, -1.0, 2)], None).err(),
+            Some(GridError::BadAxis { axis: 1 })
+        );
+        let bad_period = Axis {
+            kind: AxisKind::Cyclic { period: 1.0 },
+            ..axis(0.0, 0.25, 8)
+        };
+        assert_eq!(
+            Grid::new(&[bad_period], None).err(),
+            Some(GridError::BadAxis { axis: 0 })
+        );
+        let cr = Axis {
+            interp: Interp::CatmullRom,
+            ..axis(0.0, 1.0, 4)
+        };
+        assert_eq!(
+            Grid::new(&[cr, cr, cr, cr], None).err(),
+            Some(GridError::WindowTooLarge)
+        );
+        assert_eq!(
+            Grid::new(&[axis(0.0, 1.0, 10), axis(0.0, 1.0, 10)], Some(&[0xff; 10])).err(),
+            Some(GridError::MaskLength)
+        );
+        let g = Grid::new(&[axis(0.0, 1.0, 3)], None).unwrap();
+        assert_eq!(g.query(&[0.0, 1.0]).err(), Some(GridError::ParamCount));
+        assert_eq!(
+            g.query(&[f32::NAN]).err(),
+            Some(GridError::NonFinite { axis: 0 })
+        );
+    }
+
+    #[test]
+    fn locate_and_clamp() {
+        let g = Grid::new(&[axis(1.0, 0.5, 5)], None).unwrap();
+        let q = g.query(&[1.75]).unwrap();
+        assert_eq!(q.window(), &[1, 2]);
+        assert_eq!(q.weights(), &[0.5, 0.5]);
+        assert_eq!(q.adjust(), Adjust::None);
+        let q = g.query(&[3.0]).unwrap();
+        assert_eq!(
+            (q.window(), q.weights()),
+            (&[3u32, 4][..], &[0.0f32, 1.0][..])
+        );
+        let q = g.query(&[99.0]).unwrap();
+        assert_eq!(q.adjust(), Adjust::Clamped);
+        assert_eq!(q.params(), &[3.0]);
+    }
+
+    #[test]
+    fn cyclic_wraps() {
+        let a = Axis {
+            kind: AxisKind::Cyclic { period: 2.0 },
+            ..axis(0.0, 0.5, 4)
+        };
+        let g = Grid::new(&[a], None).unwrap();
+        let q = g.query(&[1.75]).unwrap();
+        assert_eq!(q.window(), &[3, 0]);
+        let q = g.query(&[-0.25]).unwrap();
+        assert_eq!(q.window(), &[3, 0]);
+        assert_eq!(q.adjust(), Adjust::None);
+        assert!((q.params()[0] - 1.75).abs() < 1e-6);
+    }
+
+    #[test]
+    fn projection_to_nearest_valid_cell() {
+        // 4x1 cells (5x2 samples); only cell 3 valid.
+        let g = Grid::new(&[axis(0.0, 1.0, 5), axis(0.0, 1.0, 2)], Some(&[0b1000])).unwrap();
+        let q = g.query(&[0.5, 0.5]).unwrap();
+        assert_eq!(q.adjust(), Adjust::Projected);
+        assert_eq!(q.params(), &[3.0, 0.5]);
+        let g = Grid::new(&[axis(0.0, 1.0, 5), axis(0.0, 1.0, 2)], Some(&[0])).unwrap();
+        assert_eq!(g.query(&[0.5, 0.5]).err(), Some(GridError::NoValidCell));
+    }
+
+    #[test]
+    fn limiter() {
+        let mut l = ParamLimiter::new(&[1.0, 2.0], &[0.0, 4.0]);
+        assert_eq!(l.update(&[0.0, 0.5], 0.1), &[0.0, 0.5]);
+        assert_eq!(l.update(&[10.0, 3.5], 0.1), &[0.1, 0.3]);
+        let s = l.update(&[f32::NAN, 3.5], 0.1);
+        assert!((s[0] - 0.1).abs() < 1e-6 && (s[1] - 0.1).abs() < 1e-6);
+        // Wraps the short way and stays within the period.
+        let s = l.update(&[0.0, 3.9], 0.1);
+        assert!((s[1] - 3.9).abs() < 1e-6, "{s:?}");
+        l.reset();
+        assert_eq!(l.update(&[5.0, 1.0], 0.1), &[5.0, 1.0]);
+    }
+}
