@@ -187,7 +187,8 @@ pub fn quantize_rotation(q: Quat) -> [u8; ROTATION_LEN] {
 }
 
 /// Decodes a "smallest three" rotation: the three stored components, the
-/// dropped one rebuilt as `√max(0, 1 − a² − b² − c²)`, then renormalized with
+/// dropped one rebuilt as `√max(0, 1 − a² − b² − c²)` (as `x · rsqrt(x)`),
+/// then renormalized with
 /// [`math::normalize_quat`] (skipped when the norm is already exactly 1).
 /// Bit 47 is ignored. Every bit pattern decodes to a
 /// unit quaternion.
@@ -199,7 +200,17 @@ pub fn dequantize_rotation(bytes: &[u8; ROTATION_LEN]) -> Quat {
     let b = decode_component(word >> 17);
     let c = decode_component(word >> 32);
     let rest = 1.0 - (a * a + b * b + c * c);
-    let big = math::sqrt(if rest > 0.0 { rest } else { 0.0 });
+    // `rest · rsqrt(rest)` (≤ 2 ulp) instead of the correctly rounded
+    // `math::sqrt`, whose `f64` rounding check is soft-float on the M4F; the
+    // renormalization below absorbs the difference. `rest = 1` (axis-aligned
+    // codes) stays exact.
+    let big = if rest >= 1.0 {
+        1.0
+    } else if rest > 0.0 {
+        rest * math::rsqrt(rest)
+    } else {
+        0.0
+    };
     let [w, x, y, z] = match word & 3 {
         0 => [big, a, b, c],
         1 => [a, big, b, c],
