@@ -58,7 +58,7 @@ const ROT_ENC: f32 = ROT_MID as f32 / FRAC_1_SQRT_2;
 /// Component value per code: `(1/√2) / 16383`.
 const ROT_DEC: f32 = FRAC_1_SQRT_2 / ROT_MID as f32;
 /// Mask of one 15-bit component field.
-const ROT_FIELD: u64 = 0x7FFF;
+const ROT_FIELD: u32 = 0x7FFF;
 
 /// The position scale (metres per LSB) for a table whose largest absolute
 /// coordinate is `max_abs`: the smallest `f32` scale with
@@ -145,17 +145,17 @@ fn largest(c: [f32; 4]) -> (usize, f32) {
 /// Code of one small component `v ∈ [−1/√2, 1/√2]`: `round(v·ENC) + 16383`,
 /// clamped to `[0, 32766]`.
 #[inline]
-fn encode_component(v: f32) -> u64 {
+fn encode_component(v: f32) -> u32 {
     // `t ≥ 0` over the valid range, so truncation is `floor`; below, `as`
     // saturates and the clamp catches it. NaN gives 0.
     let t = v * ROT_ENC + (ROT_MID as f32 + 0.5);
     // Clamped to [0, 32766], so the widening is exact.
-    (t as i32).clamp(0, ROT_CODE_MAX) as u64
+    (t as i32).clamp(0, ROT_CODE_MAX) as u32
 }
 
 /// Value of one 15-bit component code (the low 15 bits of `field`).
 #[inline]
-fn decode_component(field: u64) -> f32 {
+fn decode_component(field: u32) -> f32 {
     // The field is masked to 15 bits, so it fits an i32 exactly.
     ((field & ROT_FIELD) as i32 - ROT_MID) as f32 * ROT_DEC
 }
@@ -178,7 +178,7 @@ pub fn quantize_rotation(q: Quat) -> [u8; ROTATION_LEN] {
     let mut shift = 2;
     for (i, v) in c.into_iter().enumerate() {
         if i != index {
-            word |= encode_component(v * sign) << shift;
+            word |= u64::from(encode_component(v * sign)) << shift;
             shift += 15;
         }
     }
@@ -188,17 +188,18 @@ pub fn quantize_rotation(q: Quat) -> [u8; ROTATION_LEN] {
 
 /// Decodes a "smallest three" rotation: the three stored components, the
 /// dropped one rebuilt as `√max(0, 1 − a² − b² − c²)` (as `x · rsqrt(x)`),
-/// then renormalized with
-/// [`math::normalize_quat`] (skipped when the norm is already exactly 1).
-/// Bit 47 is ignored. Every bit pattern decodes to a
+/// then renormalized (one Newton step of `rsqrt`, exact for a norm of 1;
+/// [`math::normalize_quat`] for codes no writer produces). Bit 47 is ignored. Every bit pattern decodes to a
 /// unit quaternion.
 #[must_use]
 pub fn dequantize_rotation(bytes: &[u8; ROTATION_LEN]) -> Quat {
     let [b0, b1, b2, b3, b4, b5] = *bytes;
-    let word = u64::from_le_bytes([b0, b1, b2, b3, b4, b5, 0, 0]);
-    let a = decode_component(word >> 2);
-    let b = decode_component(word >> 17);
-    let c = decode_component(word >> 32);
+    // The 48-bit word as two 32-bit halves (cheaper than u64 shifts on the M4F).
+    let lo = u32::from_le_bytes([b0, b1, b2, b3]);
+    let hi = u32::from(u16::from_le_bytes([b4, b5]));
+    let a = decode_component(lo >> 2);
+    let b = decode_component(lo >> 17);
+    let c = decode_component(hi);
     let rest = 1.0 - (a * a + b * b + c * c);
     // `rest · rsqrt(rest)` (≤ 2 ulp) instead of the correctly rounded
     // `math::sqrt`, whose `f64` rounding check is soft-float on the M4F; the
@@ -211,18 +212,20 @@ pub fn dequantize_rotation(bytes: &[u8; ROTATION_LEN]) -> Quat {
     } else {
         0.0
     };
-    let [w, x, y, z] = match word & 3 {
+    let [w, x, y, z] = match lo & 3 {
         0 => [big, a, b, c],
         1 => [a, big, b, c],
         2 => [a, b, big, c],
         _ => [a, b, c, big],
     };
     let q = Quat::from_xyzw(x, y, z, w);
-    // Already unit to the last bit (axis-aligned codes): keep it exact, since
-    // `normalize_quat`'s reciprocal square root is within 2 ulp, not exact.
-    if math::quat_dot(q, q) == 1.0 {
-        q
+    if rest > 0.0 {
+        // `|q|² = |s|² + big²` is 1 to a few ulp here, so one Newton step of
+        // `rsqrt` from 1, `(3 − |q|²)/2`, renormalizes to ~1e-13 (and is exactly
+        // 1 when `|q|² = 1`, keeping axis-aligned codes exact).
+        q * (1.5 - 0.5 * math::quat_dot(q, q))
     } else {
+        // Codes no writer produces (`|s| ≥ 1`): full normalization.
         math::normalize_quat(q)
     }
 }
