@@ -189,8 +189,8 @@ pub fn quantize_rotation(q: Quat) -> [u8; ROTATION_LEN] {
 /// Decodes a "smallest three" rotation: the three stored components, the
 /// dropped one rebuilt as `√max(0, 1 − a² − b² − c²)` (as `x · rsqrt(x)`),
 /// then renormalized (one Newton step of `rsqrt`, exact for a norm of 1;
-/// [`math::normalize_quat`] for codes no writer produces). Bit 47 is ignored. Every bit pattern decodes to a
-/// unit quaternion.
+/// [`math::normalize_quat`] for codes no writer produces). Bit 47 is ignored.
+/// Every bit pattern decodes to a unit quaternion.
 #[must_use]
 pub fn dequantize_rotation(bytes: &[u8; ROTATION_LEN]) -> Quat {
     let [b0, b1, b2, b3, b4, b5] = *bytes;
