@@ -738,3 +738,299 @@ fn pose_math_is_deterministic_scalar_code() {
     assert_eq!(s1, s2);
     assert!(r::angle_between(q64(s1), r::slerp(q64(a), q64(b), 0.37)) < 2e-5);
 }
+
+// ---------------------------------------------------------------- clips
+
+use marionette_core::clip::{self, ClipError, Clips, SliceDurations, Span};
+
+/// Clips on one parameter axis (`params` values) with `frames` frames each,
+/// laid out like a clip table (parameter fastest, then frame).
+struct ClipSet {
+    params: Axis,
+    phase: Axis,
+    p: Vec<Vec3>,
+    q: Vec<Quat>,
+    durations: Vec<f32>,
+    segments: usize,
+}
+
+fn clip_set(looping: bool, phases: usize, frames: u32, seed: u64) -> ClipSet {
+    let mut rng = Rng::new(seed);
+    let segments = 2;
+    let params = Axis::linear(1.0, 0.5, 3);
+    let phase = if looping {
+        Axis {
+            min: 0.0,
+            step: 1.0 / frames as f32,
+            count: frames,
+            kind: AxisKind::Cyclic { period: 1.0 },
+            interp: Interp::Linear,
+        }
+    } else {
+        Axis::linear(0.0, phases as f32 / (frames - 1) as f32, frames)
+    };
+    let n = 3 * frames as usize * segments;
+    let base: Vec<Q> = (0..segments).map(|_| rng.quat()).collect();
+    let mut p = Vec::with_capacity(n);
+    let mut q = Vec::with_capacity(n);
+    for i in 0..n {
+        p.push(v32([0; 3].map(|_| rng.range(-1.0, 1.0))));
+        let d = r::axis_angle([0; 3].map(|_| rng.range(-1.0, 1.0)), rng.range(0.0, 1.0));
+        q.push(q32(r::mul(base[i % segments], d)));
+    }
+    let durations = (0..3 * phases)
+        .map(|_| rng.range(0.5, 2.0) as f32)
+        .collect();
+    ClipSet {
+        params,
+        phase,
+        p,
+        q,
+        durations,
+        segments,
+    }
+}
+
+impl ClipSet {
+    fn clips(&self, phases: usize) -> Clips<'static> {
+        let grid = Grid::new(&[self.params, self.phase], None).unwrap();
+        let params = Grid::new(&[self.params], None).unwrap();
+        Clips::new(grid, params, phases).unwrap()
+    }
+    fn frame(&self, clip: usize, frame: usize, seg: usize) -> (Vec3, Quat) {
+        let i = (clip + 3 * frame) * self.segments + seg;
+        (self.p[i], self.q[i])
+    }
+}
+
+#[test]
+fn clip_coefficients_zero_and_one_return_the_stored_clips_exactly() {
+    for (looping, phases) in [(true, 1), (false, 1), (false, 2)] {
+        let set = clip_set(looping, phases, 9, 30);
+        let clips = set.clips(phases);
+        let samples = SliceSamples::new(set.segments, &set.p, &set.q).unwrap();
+        let durs = SliceDurations {
+            phases,
+            values: &set.durations,
+        };
+        let mut out = Pose::<4>::default();
+        for c in 0..3 {
+            let m = clips.motion(&durs, &[1.0 + 0.5 * c as f32]).unwrap();
+            // Durations exactly the stored ones.
+            assert_eq!(m.durations(), &set.durations[c * phases..(c + 1) * phases]);
+            // Every frame exactly the stored frame.
+            for f in 0..9usize {
+                let phase = f as f32 * set.phase.step;
+                clips.pose(&m, &samples, phase, &mut out).unwrap();
+                for s in 0..set.segments {
+                    assert_eq!(
+                        (out.positions[s], out.rotations[s]),
+                        set.frame(c, f, s),
+                        "clip {c} frame {f}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn clip_interpolation_between_clips_and_durations() {
+    let set = clip_set(false, 2, 9, 31);
+    let clips = set.clips(2);
+    let samples = SliceSamples::new(set.segments, &set.p, &set.q).unwrap();
+    let durs = SliceDurations {
+        phases: 2,
+        values: &set.durations,
+    };
+    let mut out = Pose::<4>::default();
+    let mut rng = Rng::new(32);
+    for _ in 0..500 {
+        let x = rng.range(1.0, 2.0) as f32;
+        let m = clips.motion(&durs, &[x]).unwrap();
+        let u = (f64::from(x) - 1.0) / 0.5;
+        let (c, t) = ((u.floor() as usize).min(1), u - (u.floor()).min(1.0));
+        for k in 0..2 {
+            let e = f64::from(set.durations[c * 2 + k]) * (1.0 - t)
+                + f64::from(set.durations[(c + 1) * 2 + k]) * t;
+            assert!((f64::from(m.durations()[k]) - e).abs() < 1e-5, "{k}");
+        }
+        // At a frame's phase: slerp/lerp between the two clips' frames.
+        let f = (rng.next_u64() % 9) as usize;
+        clips.pose(&m, &samples, f as f32 * 0.25, &mut out).unwrap();
+        for s in 0..set.segments {
+            let (pa, qa) = set.frame(c, f, s);
+            let (pb, qb) = set.frame(c + 1, f, s);
+            assert!(dist(v64(out.positions[s]), r::lerp3(v64(pa), v64(pb), t)) < 1e-5);
+            assert!(r::angle_between(q64(out.rotations[s]), r::slerp(q64(qa), q64(qb), t)) < 2e-5);
+        }
+        // Reach timing: phase 1 (the reach pose) at the first duration.
+        let d0 = m.durations()[0];
+        assert!((m.phase_at(d0).unwrap() - 1.0).abs() < 1e-6);
+        assert!(
+            m.phase_at(d0 * 0.5).unwrap() < 1.0
+                && m.phase_at(d0 + 0.5 * m.durations()[1]).unwrap() > 1.0
+        );
+        assert_eq!(m.phase_at(m.duration() + 1.0).unwrap(), 2.0);
+    }
+    assert_eq!(
+        clips.motion(&durs, &[f32::NAN]).err(),
+        Some(ClipError::Grid(GridError::NonFinite { axis: 0 }))
+    );
+    let bad = SliceDurations {
+        phases: 2,
+        values: &[1.0; 5],
+    };
+    assert_eq!(clips.motion(&bad, &[1.9]).err(), Some(ClipError::Duration));
+    let negative = SliceDurations {
+        phases: 2,
+        values: &[1.0, 1.0, -1.0, 1.0, 1.0, 1.0],
+    };
+    assert_eq!(
+        clips.motion(&negative, &[1.2]).err(),
+        Some(ClipError::Duration)
+    );
+}
+
+#[test]
+fn reach_by_time_crosses_segments_at_the_interpolated_duration() {
+    let set = clip_set(false, 2, 9, 33);
+    let clips = set.clips(2);
+    let samples = SliceSamples::new(set.segments, &set.p, &set.q).unwrap();
+    let durs = SliceDurations {
+        phases: 2,
+        values: &set.durations,
+    };
+    let m = clips.motion(&durs, &[1.5]).unwrap();
+    let (mut a, mut b) = (Pose::<4>::default(), Pose::<4>::default());
+    // Time 0, the boundary and the end are frames 0, 4 and 8 of clip 1, exactly.
+    for (time, frame) in [(0.0, 0), (m.durations()[0], 4), (m.duration(), 8)] {
+        clips.pose_at_time(&m, &samples, time, &mut a).unwrap();
+        for s in 0..set.segments {
+            assert_eq!(
+                (a.positions[s], a.rotations[s]),
+                set.frame(1, frame, s),
+                "t={time}"
+            );
+        }
+    }
+    // Continuous across the boundary.
+    let d0 = m.durations()[0];
+    clips
+        .pose_at_time(&m, &samples, d0 * (1.0 - 1e-4), &mut a)
+        .unwrap();
+    clips
+        .pose_at_time(&m, &samples, d0 * (1.0 + 1e-4), &mut b)
+        .unwrap();
+    assert!((a.positions[0] - b.positions[0]).length() < 1e-2);
+}
+
+#[test]
+fn looping_clip_is_continuous_across_phase_one() {
+    let set = clip_set(true, 1, 12, 34);
+    let clips = set.clips(1);
+    let samples = SliceSamples::new(set.segments, &set.p, &set.q).unwrap();
+    let durs = SliceDurations {
+        phases: 1,
+        values: &set.durations,
+    };
+    let m = clips.motion(&durs, &[1.25]).unwrap();
+    let (mut a, mut b) = (Pose::<4>::default(), Pose::<4>::default());
+    clips.pose(&m, &samples, 1.0 - 1e-6, &mut a).unwrap();
+    clips.pose(&m, &samples, 0.0, &mut b).unwrap();
+    assert!((a.positions[1] - b.positions[1]).length() < 1e-4);
+    assert!(r::angle_between(q64(a.rotations[1]), q64(b.rotations[1])) < 1e-4);
+    // A whole cycle later: the same pose.
+    clips.pose_at_time(&m, &samples, 0.3, &mut a).unwrap();
+    clips
+        .pose_at_time(&m, &samples, 0.3 + m.duration(), &mut b)
+        .unwrap();
+    assert!((a.positions[0] - b.positions[0]).length() < 1e-5);
+}
+
+#[test]
+fn resample_matches_analytic_motion() {
+    // Source: x = sin(t), rotation by 0.8·t about a fixed axis, at uneven
+    // times; resampled frames are within the linear/slerp interpolation error
+    // of the closed form (rotation: exact up to slerp accuracy, since the
+    // rotation is uniform between any two frames).
+    let mut rng = Rng::new(35);
+    let mut times = vec![0.0f32];
+    while *times.last().unwrap() < 2.0 {
+        times.push(times.last().unwrap() + rng.range(0.005, 0.02) as f32);
+    }
+    let axis = [0.3, -0.5, 0.8];
+    let p: Vec<Vec3> = times
+        .iter()
+        .map(|&t| Vec3::new(f64::from(t).sin() as f32, 0.0, 0.0))
+        .collect();
+    let q: Vec<Quat> = times
+        .iter()
+        .map(|&t| q32(r::axis_angle(axis, 0.8 * f64::from(t))))
+        .collect();
+    let src = SliceSamples::new(1, &p, &q).unwrap();
+    let frames = 50;
+    let (mut op, mut oq) = (vec![Vec3::ZERO; frames], vec![Quat::IDENTITY; frames]);
+    clip::resample(
+        &src,
+        &times,
+        Span {
+            start: 0.1,
+            end: 1.9,
+        },
+        false,
+        frames,
+        &mut op,
+        &mut oq,
+    )
+    .unwrap();
+    for j in 0..frames {
+        let t = 0.1 + 1.8 * j as f64 / (frames - 1) as f64;
+        // Linear interpolation error of sin over 0.02 s is below 0.02²/8.
+        assert!((f64::from(op[j].x) - t.sin()).abs() < 6e-5, "{j}");
+        assert!(
+            r::angle_between(q64(oq[j]), r::axis_angle(axis, 0.8 * t)) < 2e-5,
+            "{j}"
+        );
+    }
+}
+
+#[test]
+fn seam_blend_closes_the_loop_smoothly() {
+    // A circle of 41 frames (frame 40 should equal frame 0) with a 3 cm and
+    // 0.1 rad seam error added progressively.
+    let k = 40;
+    let segments = 1;
+    let axis = [0.0, 1.0, 0.0];
+    let mut p: Vec<Vec3> = (0..=k)
+        .map(|i| {
+            let a = std::f64::consts::TAU * i as f64 / k as f64;
+            v32([a.cos(), a.sin(), 0.0]) + Vec3::new(0.03 * i as f32 / k as f32, 0.0, 0.0)
+        })
+        .collect();
+    let mut q: Vec<Quat> = (0..=k)
+        .map(|i| q32(r::axis_angle(axis, 0.1 * i as f64 / k as f64)))
+        .collect();
+    let original = (p.clone(), q.clone());
+    let n = clip::seam_blend(&mut p, &mut q, segments, 8).unwrap();
+    assert_eq!(n, k);
+    // Frames K and 0 now coincide.
+    assert!((p[k] - p[0]).length() < 1e-6);
+    assert!(r::angle_between(q64(q[k]), q64(q[0])) < 2e-5);
+    // Frames outside both windows are untouched.
+    for i in 9..k - 8 {
+        assert_eq!((p[i], q[i]), (original.0[i], original.1[i]));
+    }
+    // The wrap step K−1 → 0 is no larger than an ordinary step, plus a small ramp term.
+    let step = |a: Vec3, b: Vec3| (a - b).length();
+    let ordinary = step(original.0[20], original.0[21]);
+    assert!(
+        step(p[k - 1], p[0]) < ordinary * 1.1,
+        "{} vs {ordinary}",
+        step(p[k - 1], p[0])
+    );
+    assert_eq!(
+        clip::seam_blend(&mut p, &mut q, segments, 30),
+        Err(ClipError::OutputLength)
+    );
+}
