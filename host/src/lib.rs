@@ -5,4 +5,7 @@
 //! calls).
 
 pub mod blob;
+pub mod cmd;
+pub mod icount;
 pub mod import;
+pub mod qemu;

@@ -1,11 +1,36 @@
-//! The `marionette` command-line tool.
-use clap::Parser;
+//! The `marionette` command-line tool. Each subcommand lives in its own module
+//! under `marionette_host::cmd`; this file only parses and dispatches.
+use clap::{Parser, Subcommand};
+use marionette_host::cmd;
+use std::process::ExitCode;
 
 /// Marionette: drive a puppet rig from motion tables and live trackers.
 #[derive(Parser)]
 #[command(name = "marionette", version, about)]
-struct Cli {}
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
 
-fn main() {
-    let _cli = Cli::parse();
+#[derive(Subcommand)]
+enum Command {
+    /// Perform on the emulated board: boot the firmware on QEMU and stream to it.
+    Emulate(cmd::emulate::Args),
+    /// Instruction counts of the core on the emulated Cortex-M4F.
+    Icount(cmd::icount::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Emulate(args) => cmd::emulate::run(&args),
+        Command::Icount(args) => cmd::icount::run(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("marionette: {e}");
+            ExitCode::FAILURE
+        }
+    }
 }

@@ -19,13 +19,25 @@
 //! through [`math`].
 #![no_std]
 #![forbid(unsafe_code)]
-#![cfg_attr(test, allow(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used, clippy::panic))]
+#![cfg_attr(
+    test,
+    allow(
+        clippy::indexing_slicing,
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic
+    )
+)]
 
 pub mod body;
 pub mod clip;
+pub mod crc;
+pub mod frame;
 pub mod goal;
 pub mod grid;
 pub mod math;
 pub mod pose;
 pub mod servo;
 pub mod solve;
+pub mod table;
+pub mod wire;

@@ -6,6 +6,22 @@
 //! linear and always clamped, so no input (NaN included) can produce a pulse
 //! outside `[pulse_min_us, pulse_max_us]`.
 //!
+//! ## Motion limits
+//!
+//! A [`Slew`] limiter sits between the target a frame asks for and the pulse
+//! that is sent. It works in whole quarter-microseconds, the unit on the wire,
+//! so its guarantees are exact rather than approximately true in floating point:
+//!
+//! 1. the pulse never leaves the calibrated range;
+//! 2. no step changes the pulse by more than the speed limit allows for one
+//!    frame period;
+//! 3. the step changes by at most the acceleration limit per frame, except where
+//!    keeping rule 1 or 2 requires a sharper stop;
+//! 4. it brakes in time: it never commands a speed from which it could not stop
+//!    at the target within the acceleration limit.
+//!
+//! Rules 1 and 2 hold for every input, NaN and infinities included.
+//!
 //! ## Pololu Maestro
 //!
 //! The Maestro's compact serial protocol sets a channel's target with four
@@ -45,7 +61,11 @@ impl Calibration {
     #[must_use]
     pub fn pulse_us(&self, angle: f32) -> f32 {
         let span = self.angle_max - self.angle_min;
-        let mut u = if span > 0.0 { (angle - self.angle_min) / span } else { 0.5 };
+        let mut u = if span > 0.0 {
+            (angle - self.angle_min) / span
+        } else {
+            0.5
+        };
         if u.is_nan() {
             u = 0.5;
         }
@@ -81,6 +101,147 @@ pub fn quarter_us(pulse_us: f32) -> u16 {
     } else {
         q as u16
     }
+}
+
+/// Speed and acceleration limits of one channel, in output units per frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StepLimits {
+    /// Largest change of the pulse in one frame, quarter-µs (≥ 1).
+    pub max_step: u16,
+    /// Largest change of the step between frames, quarter-µs per frame (≥ 1).
+    pub max_accel: u16,
+}
+
+impl StepLimits {
+    /// Limits for a servo whose joint turns at most `max_speed` rad/s with at
+    /// most `max_accel` rad/s², driven every `period_s` seconds through `cal`.
+    /// Each limit is rounded down, but never below one quarter-µs per frame.
+    #[must_use]
+    pub fn from_joint(cal: &Calibration, max_speed: f32, max_accel: f32, period_s: f32) -> Self {
+        let span_angle = cal.angle_max - cal.angle_min;
+        let span_pulse = cal.pulse_high() - cal.pulse_low();
+        let q_per_rad = if span_angle > 0.0 {
+            span_pulse * 4.0 / span_angle
+        } else {
+            0.0
+        };
+        let to_units = |x: f32| {
+            let u = x * q_per_rad;
+            if u.is_nan() || u < 1.0 {
+                1
+            } else if u >= f32::from(u16::MAX) {
+                u16::MAX
+            } else {
+                u as u16
+            }
+        };
+        Self {
+            max_step: to_units(max_speed * period_s),
+            max_accel: to_units(max_accel * period_s * period_s),
+        }
+    }
+}
+
+/// The slew limiter of one channel: see the module docs for its guarantees.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Slew {
+    low: u16,
+    high: u16,
+    limits: StepLimits,
+    position: u16,
+    step: i32,
+}
+
+impl Slew {
+    /// A limiter for pulses in `[low, high]` quarter-µs, starting at rest at
+    /// `start` (clamped into the range).
+    #[must_use]
+    pub fn new(low: u16, high: u16, limits: StepLimits, start: u16) -> Self {
+        let (low, high) = (low.min(high), low.max(high));
+        let limits = StepLimits {
+            max_step: limits.max_step.max(1),
+            max_accel: limits.max_accel.max(1),
+        };
+        Self {
+            low,
+            high,
+            limits,
+            position: start.clamp(low, high),
+            step: 0,
+        }
+    }
+
+    /// A limiter for a calibrated channel, starting at `start_us`.
+    #[must_use]
+    pub fn for_channel(cal: &Calibration, limits: StepLimits, start_us: f32) -> Self {
+        Self::new(
+            quarter_us(cal.pulse_low()),
+            quarter_us(cal.pulse_high()),
+            limits,
+            quarter_us(start_us),
+        )
+    }
+
+    /// The pulse last sent, quarter-µs.
+    #[must_use]
+    pub fn position(&self) -> u16 {
+        self.position
+    }
+
+    /// The change applied by the last [`Slew::update`], quarter-µs.
+    #[must_use]
+    pub fn last_step(&self) -> i32 {
+        self.step
+    }
+
+    /// Moves one frame towards `target` (quarter-µs) and returns the new pulse.
+    pub fn update(&mut self, target: u16) -> u16 {
+        let target = i32::from(target.clamp(self.low, self.high));
+        let here = i32::from(self.position);
+        let vmax = i32::from(self.limits.max_step);
+        let amax = i32::from(self.limits.max_accel);
+        let dist = target - here;
+        // The fastest speed from which we can still stop within `dist`:
+        // v² ≤ 2·a·d, in whole units per frame.
+        let brake = stopping_speed(dist.unsigned_abs(), amax);
+        let wanted = dist.signum() * dist.abs().min(brake).min(vmax);
+        let step = wanted
+            .clamp(self.step - amax, self.step + amax)
+            .clamp(-vmax, vmax);
+        let next = (here + step).clamp(i32::from(self.low), i32::from(self.high));
+        self.step = next - here;
+        self.position = next as u16;
+        self.position
+    }
+}
+
+/// The largest speed (units per frame) from which braking by `accel` per
+/// frame, starting with this frame's step, covers at most `dist`.
+fn stopping_speed(dist: u32, accel: i32) -> i32 {
+    let a = accel.max(1) as u32;
+    let mut v = 0u32;
+    // The braking distance is about v²/2a: seed with √(2ad), then correct
+    // against the exact integer sum (a step or two either way).
+    let seed = crate::math::sqrt(2.0 * dist as f32 * a as f32);
+    if seed.is_finite() && seed > 0.0 {
+        v = seed as u32;
+    }
+    while v > 0 && braking_distance(v, a) > u64::from(dist) {
+        v -= 1;
+    }
+    while braking_distance(v + 1, a) <= u64::from(dist) {
+        v += 1;
+    }
+    v.min(i32::MAX as u32) as i32
+}
+
+/// Distance covered by the steps v, v−a, v−2a, … while they are positive.
+fn braking_distance(v: u32, a: u32) -> u64 {
+    let v = u64::from(v);
+    let a = u64::from(a.max(1));
+    // Terms v − k·a for k = 0..=n with n = ⌊v/a⌋ (the last one may be zero).
+    let n = v / a;
+    n * v - a * n * (n + 1) / 2 + v
 }
 
 /// The Pololu Maestro compact serial protocol.
@@ -124,7 +285,10 @@ mod tests {
         // Pololu's user's guide: channel 2 to 1500 µs (6000 quarter-µs) is
         // 0x84, 0x02, 0x70, 0x2E.
         assert_eq!(maestro::set_target(2, 6000), [0x84, 0x02, 0x70, 0x2E]);
-        assert_eq!(maestro::decode_set_target([0x84, 0x02, 0x70, 0x2E]), Some((2, 6000)));
+        assert_eq!(
+            maestro::decode_set_target([0x84, 0x02, 0x70, 0x2E]),
+            Some((2, 6000))
+        );
         assert_eq!(maestro::decode_set_target([0x85, 0x02, 0x70, 0x2E]), None);
     }
 
@@ -132,7 +296,16 @@ mod tests {
     fn pulses_stay_inside_the_calibrated_range() {
         let mut cal = Calibration::HOBBY_180;
         cal.trim_us = 40.0;
-        for angle in [-10.0, -1.0, 0.0, 1.0, 10.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        for angle in [
+            -10.0,
+            -1.0,
+            0.0,
+            1.0,
+            10.0,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ] {
             let p = cal.pulse_us(angle);
             assert!((1000.0..=2000.0).contains(&p), "{angle} -> {p}");
         }
@@ -140,6 +313,102 @@ mod tests {
         cal.reversed = true;
         cal.trim_us = 0.0;
         assert_eq!(cal.pulse_us(cal.angle_min), 2000.0);
+    }
+
+    /// A tiny deterministic generator for test inputs.
+    fn lcg(state: &mut u32) -> u32 {
+        *state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        *state >> 8
+    }
+
+    #[test]
+    fn slew_never_leaves_the_range_or_exceeds_the_speed_limit() {
+        let limits = StepLimits {
+            max_step: 37,
+            max_accel: 5,
+        };
+        let mut slew = Slew::new(4000, 8000, limits, 6000);
+        let mut seed = 7;
+        for _ in 0..20_000 {
+            // Targets anywhere in u16, often far outside the range.
+            let target = (lcg(&mut seed) & 0xFFFF) as u16;
+            let before = slew.position();
+            let after = slew.update(target);
+            assert!((4000..=8000).contains(&after));
+            assert!((i32::from(after) - i32::from(before)).abs() <= 37);
+        }
+    }
+
+    #[test]
+    fn slew_reaches_a_held_target_without_breaking_the_acceleration_limit() {
+        let limits = StepLimits {
+            max_step: 40,
+            max_accel: 3,
+        };
+        for (start, target) in [
+            (4000u16, 8000u16),
+            (8000, 4000),
+            (6000, 6001),
+            (6000, 5000),
+            (4000, 4500),
+        ] {
+            let mut slew = Slew::new(4000, 8000, limits, start);
+            let mut prev_step = 0;
+            let mut frames = 0;
+            while slew.position() != target || slew.last_step() != 0 {
+                slew.update(target);
+                let step = slew.last_step();
+                assert!(
+                    (step - prev_step).abs() <= 3,
+                    "{start}->{target}: step {prev_step} -> {step}"
+                );
+                // Braking in time: never passes the target.
+                let p = i32::from(slew.position());
+                let (lo, hi) = (i32::from(start.min(target)), i32::from(start.max(target)));
+                assert!(
+                    (lo..=hi).contains(&p),
+                    "{start}->{target}: overshoot to {p}"
+                );
+                prev_step = step;
+                frames += 1;
+                assert!(frames < 10_000, "{start}->{target} never settles");
+            }
+            // Independent bound: accelerate, cruise, brake takes at most
+            // distance/vmax + 2·vmax/amax + 2 frames.
+            let dist = i32::from(start.abs_diff(target));
+            assert!(
+                frames <= dist / 40 + 2 * 40 / 3 + 2 + 1,
+                "{start}->{target}: {frames} frames"
+            );
+        }
+    }
+
+    #[test]
+    fn nan_targets_and_degenerate_limits_are_safe() {
+        let cal = Calibration::HOBBY_180;
+        let limits = StepLimits::from_joint(&cal, f32::NAN, -1.0, 0.001);
+        assert_eq!(
+            limits,
+            StepLimits {
+                max_step: 1,
+                max_accel: 1
+            }
+        );
+        let mut slew = Slew::for_channel(&cal, limits, f32::NAN);
+        for _ in 0..100 {
+            let p = slew.update(quarter_us(cal.pulse_us(f32::NAN)));
+            assert!((4000..=8000).contains(&p));
+        }
+    }
+
+    #[test]
+    fn joint_limits_convert_to_quarter_microseconds_per_frame() {
+        // 180° over 1000 µs = 4000 quarter-µs per π rad. At 6 rad/s and 1 kHz:
+        // 0.006 rad per frame = 7.64 quarter-µs -> 7.
+        let limits = StepLimits::from_joint(&Calibration::HOBBY_180, 6.0, 2000.0, 0.001);
+        assert_eq!(limits.max_step, 7);
+        // 2000 rad/s² · 1e-6 s² = 0.002 rad = 2.55 -> 2.
+        assert_eq!(limits.max_accel, 2);
     }
 
     #[test]

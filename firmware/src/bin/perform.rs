@@ -1,0 +1,20 @@
+//! # perform: the puppet on the emulated board
+//!
+//! The live loop on QEMU `mps2-an386`: tracker input on UART0, servo commands
+//! (Pololu Maestro protocol) on UART1, exit status over semihosting.
+//!
+//! Run it through the host, which builds it, boots QEMU and streams input:
+//! `cargo run --release -p marionette-host -- emulate` (from the repository root).
+#![no_std]
+#![no_main]
+
+use cortex_m_rt::entry;
+use marionette_firmware::app;
+use marionette_firmware::board::{Board, qemu::Qemu};
+
+#[entry]
+fn main() -> ! {
+    let mut board = Qemu::init();
+    let outcome = app::run(&mut board);
+    board.finish(outcome)
+}

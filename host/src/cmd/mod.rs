@@ -1,0 +1,8 @@
+//! One module per `marionette` subcommand. Each has an `Args` (clap) and a
+//! `run(&Args) -> Result<(), CmdError>`.
+
+pub mod emulate;
+pub mod icount;
+
+/// An error from any subcommand, printed by `main` as `marionette: <error>`.
+pub type CmdError = Box<dyn std::error::Error + Send + Sync>;

@@ -1,0 +1,170 @@
+//! Instruction counts from the emulated Cortex-M4F.
+//!
+//! The firmware's `bench` binary times named regions with SysTick under
+//! `-icount shift=7,align=off` and prints `row <name> <baseline|-> <calls>
+//! <ticks>` lines over semihosting (see `firmware/src/icount.rs`). This module
+//! runs it and turns the rows into instructions per call, with each row's ratio
+//! against its baseline row from the same run.
+
+use crate::qemu::{self, Config, QemuError};
+use serde::Serialize;
+use std::time::Duration;
+
+/// SysTick ticks per instruction under `-icount shift=7` on the 25 MHz board.
+pub const TICKS_PER_INSTRUCTION: f64 = 3.2;
+
+/// One measured region.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Row {
+    /// The region's name.
+    pub name: String,
+    /// The row it is compared against, if any.
+    pub baseline: Option<String>,
+    /// Calls measured in the region.
+    pub calls: u32,
+    /// SysTick ticks for the whole region, overhead removed.
+    pub ticks: u32,
+    /// Instructions per call (ticks / 3.2 / calls).
+    pub instructions: f64,
+    /// Baseline instructions per call divided by this row's (higher is faster).
+    pub speedup: Option<f64>,
+}
+
+/// Errors from running or reading the bench.
+#[derive(Debug, thiserror::Error)]
+pub enum IcountError {
+    /// The emulator failed.
+    #[error(transparent)]
+    Qemu(#[from] QemuError),
+    /// The bench exited with a failure status.
+    #[error("the bench firmware exited with status {0:?}")]
+    Status(Option<i32>),
+    /// A console line did not parse.
+    #[error("bench output line {line}: {why}: {text:?}")]
+    Parse {
+        /// 1-based line number in the bench's console output.
+        line: usize,
+        /// What was wrong.
+        why: &'static str,
+        /// The line.
+        text: String,
+    },
+    /// A row names a baseline that no earlier row has.
+    #[error("row {row} names baseline {baseline}, which is not an earlier row")]
+    UnknownBaseline {
+        /// The row.
+        row: String,
+        /// The missing baseline.
+        baseline: String,
+    },
+}
+
+/// Parses the bench's console output into rows with ratios.
+pub fn parse(console: &str) -> Result<Vec<Row>, IcountError> {
+    let mut rows: Vec<Row> = Vec::new();
+    for (i, text) in console.lines().enumerate() {
+        let mut words = text.split_whitespace();
+        if words.next() != Some("row") {
+            continue;
+        }
+        let bad = |why| IcountError::Parse {
+            line: i + 1,
+            why,
+            text: text.to_string(),
+        };
+        let name = words.next().ok_or_else(|| bad("missing name"))?.to_string();
+        let baseline = words.next().ok_or_else(|| bad("missing baseline"))?;
+        let calls: u32 = words
+            .next()
+            .and_then(|w| w.parse().ok())
+            .ok_or_else(|| bad("bad call count"))?;
+        let ticks: u32 = words
+            .next()
+            .and_then(|w| w.parse().ok())
+            .ok_or_else(|| bad("bad tick count"))?;
+        if calls == 0 {
+            return Err(bad("zero calls"));
+        }
+        let instructions = f64::from(ticks) / TICKS_PER_INSTRUCTION / f64::from(calls);
+        let (baseline, speedup) = if baseline == "-" {
+            (None, None)
+        } else {
+            let base = rows.iter().find(|r| r.name == baseline).ok_or_else(|| {
+                IcountError::UnknownBaseline {
+                    row: name.clone(),
+                    baseline: baseline.to_string(),
+                }
+            })?;
+            (
+                Some(baseline.to_string()),
+                Some(base.instructions / instructions),
+            )
+        };
+        rows.push(Row {
+            name,
+            baseline,
+            calls,
+            ticks,
+            instructions,
+            speedup,
+        });
+    }
+    Ok(rows)
+}
+
+/// Builds and runs the bench firmware under `-icount` and returns its rows.
+pub fn measure() -> Result<Vec<Row>, IcountError> {
+    let elf = qemu::build_firmware("bench")?;
+    let config = Config {
+        icount: true,
+        serial: false,
+        timeout: Duration::from_secs(300),
+        ..Config::new(elf)
+    };
+    let out = qemu::run(&config, &[])?;
+    if out.status != Some(0) {
+        return Err(IcountError::Status(out.status));
+    }
+    parse(&out.console)
+}
+
+/// Formats rows as a Markdown table.
+#[must_use]
+pub fn table(rows: &[Row]) -> String {
+    let mut s = String::from(
+        "| region | instructions per call | calls | baseline | speed-up vs baseline |\n\
+         |---|---:|---:|---|---:|\n",
+    );
+    for r in rows {
+        let base = r.baseline.as_deref().unwrap_or("");
+        let ratio = r.speedup.map(|x| format!("{x:.1}×")).unwrap_or_default();
+        s.push_str(&format!(
+            "| {} | {:.0} | {} | {} | {} |\n",
+            r.name, r.instructions, r.calls, base, ratio
+        ));
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_parse_with_ratio_against_the_baseline() {
+        let text = "overhead 12\nrow a - 10 3200\nnoise\nrow b a 10 320\nend\n";
+        let rows = parse(text).unwrap();
+        assert_eq!(rows.len(), 2);
+        assert_eq!(rows[0].instructions, 100.0);
+        assert_eq!(rows[1].instructions, 10.0);
+        assert_eq!(rows[1].speedup, Some(10.0));
+    }
+
+    #[test]
+    fn bad_rows_name_their_line() {
+        let err = parse("row a - x 1\n").unwrap_err().to_string();
+        assert!(err.contains("line 1"), "{err}");
+        let err = parse("row b a 1 1\n").unwrap_err().to_string();
+        assert!(err.contains("baseline a"), "{err}");
+    }
+}
