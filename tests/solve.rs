@@ -1,1 +1,411 @@
-//! (solve tests, in progress)
+//! Reference tests for the POSIT solver (`marionette_core::{body, goal, solve}`).
+//!
+//! Oracles, none of them the code under test:
+//! - the paper's scenarios (Badler, Manoochehri & Walters 1987, Figs. 3–11) with
+//!   the properties the paper states (goals met; d₂ = 4·d₁ for weights 40/10;
+//!   heavy goals do not move), every distance measured with the `f64` forward
+//!   kinematics of `solve/reference.rs`, not with the core's;
+//! - the spring model's equilibrium (Σ w·r = 0 for a free translation);
+//! - a slow `f64` optimiser (spectral projected gradient with numerical
+//!   gradients and random restarts) for the weighted optimum on random goal sets;
+//! - the BVH file itself for the CMU skeleton's table and for the projection of
+//!   real frames onto the joints.
+
+#[path = "solve/reference.rs"]
+mod reference;
+
+use glam::{Quat, Vec3};
+use marionette_core::body::{Angles, Axis, Body, cmu, tempus};
+use marionette_core::goal::{Attach, Frame, Goal, GoalSet, PlaneSide, Target};
+use marionette_core::pose::{LocalPose, Pose};
+use marionette_core::solve::{Method, Report, ReachTree, RootMode, Solver, solve};
+use reference::{RefBody, RefGoal, RefState, RefTarget, V};
+
+const METHODS: [Method; 4] = [Method::Greedy, Method::Ccd, Method::Dls, Method::TreeDls];
+type A = Angles<64>;
+
+// ---------------------------------------------------------------- helpers
+
+/// Small deterministic PRNG (xorshift64*).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * ((self.next() >> 11) as f64 / (1u64 << 53) as f64)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+}
+
+fn v(x: f64, y: f64, z: f64) -> Vec3 {
+    Vec3::new(x as f32, y as f32, z as f32)
+}
+fn vf(p: V) -> Vec3 {
+    v(p[0], p[1], p[2])
+}
+
+/// The TEMPUS figure standing at rest, root at its standing height.
+fn tempus_standing() -> A {
+    let mut a = A::rest(&tempus::BODY).unwrap();
+    a.root_position = Vec3::new(0.0, tempus::ROOT_HEIGHT, 0.0);
+    a
+}
+
+fn solver(method: Method, root: RootMode) -> Solver {
+    Solver { max_iterations: 60, ..Solver::DEFAULT }.with_method(method).with_root(root)
+}
+
+fn run<const G: usize>(s: &Solver, body: &Body<'_>, goals: &GoalSet<G>, start: &A) -> (A, Report<G>) {
+    let mut a = *start;
+    let mut pose = Pose::<64>::default();
+    let report = solve(s, body, goals, &mut a, &mut pose).unwrap();
+    (a, report)
+}
+
+/// The reference pose of a joint state.
+fn ref_pose(body: &Body<'_>, a: &A) -> reference::RefPose {
+    reference::fk(&RefBody::of(body), &RefState::of(a))
+}
+
+/// Reference world position of a segment's touch point.
+fn ref_touch(body: &Body<'_>, a: &A, seg: u8) -> V {
+    let rb = RefBody::of(body);
+    reference::world(&reference::fk(&rb, &RefState::of(a)), usize::from(seg), rb.touch[usize::from(seg)])
+}
+
+/// A core goal as a reference goal (translation of the data, world frame or a
+/// segment frame; orientation targets as matrices).
+fn ref_goal(body: &Body<'_>, g: &Goal) -> RefGoal {
+    let seg = usize::from(g.segment);
+    let local = match g.attach {
+        Attach::Touch => RefBody::of(body).touch[seg],
+        Attach::Point(p) => [p.x.into(), p.y.into(), p.z.into()],
+    };
+    let f = |p: Vec3| -> V { [p.x.into(), p.y.into(), p.z.into()] };
+    let target = match (g.target, g.frame) {
+        (Target::Position(p), Frame::World) => RefTarget::Point(f(p)),
+        (Target::Position(p), Frame::Segment(s)) => RefTarget::PointIn(usize::from(s), f(p)),
+        (Target::Plane { normal, offset, side }, Frame::World) => {
+            RefTarget::Plane { n: f(normal), d: offset.into(), above: side == PlaneSide::Above }
+        }
+        (Target::Orientation(q), Frame::World) => {
+            RefTarget::Orient(reference::quat_matrix(q.x.into(), q.y.into(), q.z.into(), q.w.into()))
+        }
+        other => panic!("no reference for {other:?}"),
+    };
+    RefGoal { seg, local, target, weight: g.weight.into() }
+}
+
+/// Reference residuals of every goal at a state.
+fn ref_residuals<const G: usize>(body: &Body<'_>, goals: &GoalSet<G>, a: &A) -> Vec<f64> {
+    let pose = ref_pose(body, a);
+    goals.as_slice().iter().map(|g| reference::residual(&pose, &ref_goal(body, g))).collect()
+}
+
+/// Reference weighted error.
+fn ref_energy<const G: usize>(body: &Body<'_>, goals: &GoalSet<G>, a: &A) -> f64 {
+    let rg: Vec<RefGoal> = goals.as_slice().iter().map(|g| ref_goal(body, g)).collect();
+    reference::energy(&RefBody::of(body), &RefState::of(a), &rg)
+}
+
+fn assert_within_limits(body: &Body<'_>, a: &A, what: &str) {
+    for (i, s) in body.segments.iter().enumerate().skip(1) {
+        for (d, &x) in s.joint.dofs().iter().zip(&a.values[i]) {
+            assert!(x >= d.min && x <= d.max, "{what}: {} {:?} = {x} outside [{}, {}]", s.name, d.axis, d.min, d.max);
+        }
+    }
+}
+
+/// A joint state of the body with chosen angles (degrees) on some segments.
+fn pose_with(body: &Body<'_>, root: Vec3, set: &[(u8, [f64; 3])]) -> A {
+    let mut a = A::rest(body).unwrap();
+    a.root_position = root;
+    for &(s, deg) in set {
+        a.values[usize::from(s)] = deg.map(|d| d.to_radians() as f32);
+    }
+    let before = a;
+    a.clamp_to_limits(body);
+    assert_eq!(a, before, "pose_with: angles outside limits");
+    a
+}
+
+// ---------------------------------------------------------------- the paper's scenarios
+
+/// Figs. 3–4: a single reachable goal on the right hand is met.
+#[test]
+fn single_reach() {
+    use tempus::index::*;
+    let body = &tempus::BODY;
+    // The goal is where the palm is with the right arm raised forward and bent:
+    // reachable by construction.
+    let target_pose = pose_with(body, Vec3::new(0.0, 0.95, 0.0), &[(RIGHT_UPPER_ARM, [-70.0, -20.0, 10.0]), (RIGHT_LOWER_ARM, [-60.0, 20.0, 0.0])]);
+    let goal = vf(ref_touch(body, &target_pose, RIGHT_HAND));
+    let mut goals = GoalSet::<4>::new();
+    goals.push(Goal::reach(RIGHT_HAND, goal, 1.0)).unwrap();
+    for root in [RootMode::Fixed, RootMode::Float] {
+        for m in METHODS {
+            let (a, rep) = run(&solver(m, root), body, &goals, &tempus_standing());
+            let d = ref_residuals(body, &goals, &a)[0];
+            println!("single reach {m:?} {root:?}: residual {:.3} mm, {} iterations, converged {}", d * 1e3, rep.iterations, rep.converged);
+            assert_within_limits(body, &a, "single reach");
+            if m != Method::Greedy {
+                assert!(d <= 1e-4, "{m:?} {root:?}: residual {d}");
+            }
+        }
+    }
+}
+
+/// Fig. 5: two reachable goals (both hands) are both met.
+#[test]
+fn two_reachable_goals() {
+    use tempus::index::*;
+    let body = &tempus::BODY;
+    let target_pose = pose_with(
+        body,
+        Vec3::new(0.0, 0.95, 0.0),
+        &[
+            (UPPER_TORSO, [10.0, 5.0, -10.0]),
+            (RIGHT_UPPER_ARM, [-80.0, -10.0, 0.0]),
+            (RIGHT_LOWER_ARM, [-40.0, 0.0, 0.0]),
+            (LEFT_UPPER_ARM, [-30.0, 40.0, 0.0]),
+            (LEFT_LOWER_ARM, [-90.0, 0.0, 0.0]),
+        ],
+    );
+    let mut goals = GoalSet::<4>::new();
+    goals.push(Goal::reach(RIGHT_HAND, vf(ref_touch(body, &target_pose, RIGHT_HAND)), 1.0)).unwrap();
+    goals.push(Goal::reach(LEFT_HAND, vf(ref_touch(body, &target_pose, LEFT_HAND)), 1.0)).unwrap();
+    for m in METHODS {
+        let (a, rep) = run(&solver(m, RootMode::Fixed), body, &goals, &tempus_standing());
+        let r = ref_residuals(body, &goals, &a);
+        println!("two reachable {m:?}: residuals {:.3} {:.3} mm, {} it", r[0] * 1e3, r[1] * 1e3, rep.iterations);
+        assert_within_limits(body, &a, "two reachable");
+        if m != Method::Greedy {
+            assert!(r[0] <= 1e-4 && r[1] <= 1e-4, "{m:?}: {r:?}");
+        }
+    }
+}
+
+/// Figs. 6–7: two unreachable goals on the hand (40) and the upper arm (10):
+/// at equilibrium 40·d₁ = 10·d₂, so d₂ = 4·d₁.
+#[test]
+fn two_unreachable_weighted_goals() {
+    use tempus::index::*;
+    let body = &tempus::BODY;
+    let start = tempus_standing();
+    let elbow = ref_touch(body, &start, RIGHT_UPPER_ARM);
+    // Goals 0.8 m apart along the forward direction; the forearm and hand
+    // (0.34 m) cannot span them.
+    let mut goals = GoalSet::<4>::new();
+    goals.push(Goal::reach(RIGHT_HAND, vf(elbow) + Vec3::new(0.0, 0.0, 0.8), 40.0)).unwrap();
+    goals.push(Goal::reach(RIGHT_UPPER_ARM, vf(elbow), 10.0)).unwrap();
+    for m in METHODS {
+        let (a, rep) = run(&solver(m, RootMode::Float), body, &goals, &start);
+        let r = ref_residuals(body, &goals, &a);
+        let ratio = r[1] / r[0];
+        println!("unreachable 40/10 {m:?}: d1 {:.2} mm, d2 {:.2} mm, d2/d1 {ratio:.4}, {} it", r[0] * 1e3, r[1] * 1e3, rep.iterations);
+        assert_within_limits(body, &a, "two unreachable");
+        if m == Method::TreeDls {
+            assert!((ratio - 4.0).abs() <= 0.08, "{m:?}: ratio {ratio}");
+        }
+    }
+}
+
+/// Figs. 8–9: sitting. Lower torso 100 on the seat, back and knees 10: the
+/// lower torso ends within 1 mm of its goal.
+#[test]
+fn sitting() {
+    use tempus::index::*;
+    let body = &tempus::BODY;
+    // Where the goals go: the pelvis 0.45 m lower and 0.10 m back, thighs
+    // horizontal, the back leaning 10° back (reachable, as the paper's goals
+    // are set "in the desired direction" of each segment).
+    let seat = Vec3::new(0.0, 0.50, -0.10);
+    let sitting = pose_with(
+        body,
+        seat,
+        &[(UPPER_TORSO, [-10.0, 0.0, 0.0]), (LEFT_UPPER_LEG, [-90.0, 0.0, 0.0]), (RIGHT_UPPER_LEG, [-90.0, 0.0, 0.0])],
+    );
+    let mut goals = GoalSet::<4>::new();
+    goals.push(Goal::reach(LOWER_TORSO, seat, 100.0)).unwrap();
+    goals.push(Goal::reach(UPPER_TORSO, vf(ref_touch(body, &sitting, UPPER_TORSO)), 10.0)).unwrap();
+    goals.push(Goal::reach(LEFT_UPPER_LEG, vf(ref_touch(body, &sitting, LEFT_UPPER_LEG)), 10.0)).unwrap();
+    goals.push(Goal::reach(RIGHT_UPPER_LEG, vf(ref_touch(body, &sitting, RIGHT_UPPER_LEG)), 10.0)).unwrap();
+    for m in METHODS {
+        let (a, rep) = run(&solver(m, RootMode::Float), body, &goals, &tempus_standing());
+        let r = ref_residuals(body, &goals, &a);
+        println!("sitting {m:?}: torso {:.3} mm, back {:.2} mm, knees {:.2} {:.2} mm, {} it", r[0] * 1e3, r[1] * 1e3, r[2] * 1e3, r[3] * 1e3, rep.iterations);
+        assert_within_limits(body, &a, "sitting");
+        if m != Method::Greedy {
+            assert!(r[0] <= 1e-3, "{m:?}: lower torso {r:?}");
+        }
+    }
+}
+
+/// Fig. 11: restrained reach. Lower torso and left shoulder weighted 100 at
+/// their current positions, right hand 10 on an object in front: the waist and
+/// the shoulder move at most 1 cm.
+#[test]
+fn restrained_reach() {
+    use tempus::index::*;
+    let body = &tempus::BODY;
+    let start = tempus_standing();
+    let shoulder = ref_touch(body, &start, RIGHT_SHOULDER);
+    for (label, reach) in [("reachable", 0.50), ("just out of reach", 0.75)] {
+        let mut goals = GoalSet::<4>::new();
+        goals.push(Goal::reach(LOWER_TORSO, vf(ref_touch(body, &start, LOWER_TORSO)), 100.0)).unwrap();
+        goals.push(Goal::reach(LEFT_SHOULDER, vf(ref_touch(body, &start, LEFT_SHOULDER)), 100.0)).unwrap();
+        goals.push(Goal::reach(RIGHT_HAND, vf(shoulder) + Vec3::new(0.0, -0.05, reach as f32), 10.0)).unwrap();
+        for m in METHODS {
+            let (a, rep) = run(&solver(m, RootMode::Float), body, &goals, &start);
+            let r = ref_residuals(body, &goals, &a);
+            println!(
+                "restrained reach ({label}) {m:?}: waist {:.2} mm, shoulder {:.2} mm, hand {:.2} mm, {} it",
+                r[0] * 1e3,
+                r[1] * 1e3,
+                r[2] * 1e3,
+                rep.iterations
+            );
+            assert_within_limits(body, &a, "restrained reach");
+            assert!(r[0] <= 0.01 && r[1] <= 0.01, "{m:?} {label}: {r:?}");
+        }
+    }
+}
+
+/// "A two-handed reach goal can be specified by giving each hand segment the
+/// same spatial goal."
+#[test]
+fn two_handed_reach() {
+    use tempus::index::*;
+    let body = &tempus::BODY;
+    let start = tempus_standing();
+    let chest = ref_touch(body, &start, UPPER_TORSO);
+    let target = vf(chest) + Vec3::new(0.0, -0.15, 0.40);
+    let mut goals = GoalSet::<4>::new();
+    goals.push(Goal::reach(LEFT_HAND, target, 10.0)).unwrap();
+    goals.push(Goal::reach(RIGHT_HAND, target, 10.0)).unwrap();
+    for root in [RootMode::Fixed, RootMode::Float] {
+        for m in METHODS {
+            let (a, rep) = run(&solver(m, root), body, &goals, &start);
+            let r = ref_residuals(body, &goals, &a);
+            let apart = reference::dist(ref_touch(body, &a, LEFT_HAND), ref_touch(body, &a, RIGHT_HAND));
+            println!("two-handed {m:?} {root:?}: {:.3} {:.3} mm, hands {:.3} mm apart, {} it", r[0] * 1e3, r[1] * 1e3, apart * 1e3, rep.iterations);
+            assert_within_limits(body, &a, "two-handed");
+            if m != Method::Greedy {
+                assert!(r[0] <= 1e-4 && r[1] <= 1e-4 && apart <= 2e-4, "{m:?} {root:?}: {r:?}");
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------- weighted optimality
+
+/// A random pose: every DOF uniform in the middle half of its range.
+fn random_pose(body: &Body<'_>, rng: &mut Rng, root: Vec3) -> A {
+    let mut a = A::rest(body).unwrap();
+    a.root_position = root;
+    for (i, s) in body.segments.iter().enumerate().skip(1) {
+        for (k, d) in s.joint.dofs().iter().enumerate() {
+            let (lo, hi) = (f64::from(d.min), f64::from(d.max));
+            let mid = 0.5 * (lo + hi);
+            a.values[i][k] = rng.uniform(mid - 0.25 * (hi - lo), mid + 0.25 * (hi - lo)) as f32;
+        }
+    }
+    a
+}
+
+/// `a` with every DOF moved by up to ±`spread` rad, within limits.
+fn perturb(body: &Body<'_>, rng: &mut Rng, a: &A, spread: f64) -> A {
+    let mut b = *a;
+    for (i, s) in body.segments.iter().enumerate().skip(1) {
+        for k in 0..s.joint.count() {
+            b.values[i][k] += rng.uniform(-spread, spread) as f32;
+        }
+    }
+    b.clamp_to_limits(body);
+    b
+}
+
+/// A random goal set on the CMU skeleton: 2–4 goals on distinct segments at
+/// the touch points of a random pose, displaced up to 15 cm (so some are
+/// unreachable and conflict), weights log-uniform in [1, 100].
+fn random_goals(rng: &mut Rng, truth: &A) -> GoalSet<4> {
+    use cmu::index::*;
+    let candidates = [LEFT_HAND, RIGHT_HAND, LEFT_FOOT, RIGHT_FOOT, cmu::index::HEAD, LEFT_FORE_ARM, RIGHT_FORE_ARM, LEFT_LEG, RIGHT_LEG];
+    let k = 2 + rng.below(3);
+    let mut chosen: Vec<u8> = vec![];
+    while chosen.len() < k {
+        let c = candidates[rng.below(candidates.len())];
+        if !chosen.contains(&c) {
+            chosen.push(c);
+        }
+    }
+    let mut goals = GoalSet::<4>::new();
+    for seg in chosen {
+        let p = ref_touch(&cmu::BODY, truth, seg);
+        let d = [rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0)];
+        let d = reference::scale(d, rng.uniform(0.0, 0.15) / reference::norm(d).max(1e-9));
+        let w = 10f64.powf(rng.uniform(0.0, 2.0));
+        goals.push(Goal::reach(seg, vf(reference::add(p, d)), w as f32)).unwrap();
+    }
+    goals
+}
+
+/// The reference optimum: the best of projected-gradient runs from the
+/// solver's start, the solver's answer, the generating pose, the rest pose and
+/// random poses. Returns the weighted error.
+fn reference_optimum(goals: &GoalSet<4>, starts: &[&A], rng: &mut Rng, restarts: usize, root: RootMode) -> f64 {
+    let body = &cmu::BODY;
+    let rb = RefBody::of(body);
+    let rg: Vec<RefGoal> = goals.as_slice().iter().map(|g| ref_goal(body, g)).collect();
+    let segs: Vec<usize> = rg.iter().map(|g| g.seg).collect();
+    let vars = reference::variables(&rb, 0, &segs, root == RootMode::Float);
+    let mut best = f64::INFINITY;
+    let mut run_from = |a: &A| {
+        let (_, e) = reference::minimize(&rb, &rg, &vars, &RefState::of(a), 400);
+        best = best.min(e);
+    };
+    for a in starts {
+        run_from(a);
+    }
+    let root_position = starts[0].root_position;
+    for _ in 0..restarts {
+        run_from(&random_pose(body, rng, root_position));
+    }
+    best
+}
+
+/// ≥100 random goal sets on the CMU skeleton: the solver's weighted error is
+/// within 2% of the reference optimum, starting from a "synthesized" pose (the
+/// generating pose perturbed by up to ±0.3 rad per DOF).
+#[test]
+fn weighted_optimality_against_reference() {
+    let body = &cmu::BODY;
+    let mut rng = Rng(0x5EED_0F_0B7);
+    let root = Vec3::new(0.0, 0.95, 0.0);
+    let s = Solver { max_iterations: 40, ..Solver::DEFAULT };
+    let (mut worst, mut total_it, mut fails) = (0.0f64, 0u32, vec![]);
+    let n = 100;
+    for i in 0..n {
+        let truth = random_pose(body, &mut rng, root);
+        let goals = random_goals(&mut rng, &truth);
+        let start = perturb(body, &mut rng, &truth, 0.3);
+        let (a, rep) = run(&s, body, &goals, &start);
+        assert_within_limits(body, &a, "optimality");
+        let e_solver = ref_energy(body, &goals, &a);
+        let e_ref = reference_optimum(&goals, &[&start, &a, &truth], &mut rng, 2, RootMode::Fixed);
+        let excess = (e_solver - e_ref) / e_ref.max(1e-12);
+        total_it += rep.iterations;
+        worst = worst.max(excess);
+        if e_solver > 1.02 * e_ref + 1e-9 {
+            fails.push((i, e_solver, e_ref, rep.iterations));
+        }
+    }
+    println!("weighted optimality: {n} sets, worst excess {:.3}%, mean iterations {:.1}, failures {fails:?}", worst * 100.0, f64::from(total_it) / f64::from(n));
+    assert!(fails.is_empty(), "{} of {n} sets beyond 2%: {fails:?}", fails.len());
+}

@@ -124,13 +124,24 @@ impl Residual {
 
 impl Goal {
     /// An inactive goal (weight 0).
-    pub const INACTIVE: Goal =
-        Goal { segment: 0, attach: Attach::Touch, target: Target::Position(Vec3::ZERO), frame: Frame::World, weight: 0.0 };
+    pub const INACTIVE: Goal = Goal {
+        segment: 0,
+        attach: Attach::Touch,
+        target: Target::Position(Vec3::ZERO),
+        frame: Frame::World,
+        weight: 0.0,
+    };
 
     /// The paper's goal: this segment's touch point at a world location.
     #[must_use]
     pub const fn reach(segment: u8, location: Vec3, weight: f32) -> Self {
-        Goal { segment, attach: Attach::Touch, target: Target::Position(location), frame: Frame::World, weight }
+        Goal {
+            segment,
+            attach: Attach::Touch,
+            target: Target::Position(location),
+            frame: Frame::World,
+            weight,
+        }
     }
 
     /// The touch point on (or, with [`PlaneSide::Above`], not below) the world
@@ -138,13 +149,29 @@ impl Goal {
     #[must_use]
     pub fn plane(segment: u8, normal: Vec3, offset: f32, side: PlaneSide, weight: f32) -> Self {
         let normal = math::normalize_vec3(normal);
-        Goal { segment, attach: Attach::Touch, target: Target::Plane { normal, offset, side }, frame: Frame::World, weight }
+        Goal {
+            segment,
+            attach: Attach::Touch,
+            target: Target::Plane {
+                normal,
+                offset,
+                side,
+            },
+            frame: Frame::World,
+            weight,
+        }
     }
 
     /// The segment's world orientation equal to `rotation`.
     #[must_use]
     pub const fn orient(segment: u8, rotation: Quat, weight: f32) -> Self {
-        Goal { segment, attach: Attach::Touch, target: Target::Orientation(rotation), frame: Frame::World, weight }
+        Goal {
+            segment,
+            attach: Attach::Touch,
+            target: Target::Orientation(rotation),
+            frame: Frame::World,
+            weight,
+        }
     }
 
     /// The same goal on another point of the segment (segment frame, m).
@@ -218,8 +245,14 @@ impl Goal {
             Some((_, r)) => r * v,
         };
         match self.target {
-            Target::Position(g) => Some(Residual::Position(to_world(g) - self.world_point(body, pose)?)),
-            Target::Plane { normal, offset, side } => {
+            Target::Position(g) => Some(Residual::Position(
+                to_world(g) - self.world_point(body, pose)?,
+            )),
+            Target::Plane {
+                normal,
+                offset,
+                side,
+            } => {
                 let n = rotate(normal);
                 let origin = frame.map_or(Vec3::ZERO, |(o, _)| o);
                 let s = n.dot(self.world_point(body, pose)?) - offset - n.dot(origin);
@@ -228,12 +261,17 @@ impl Goal {
                     PlaneSide::Above if s < 0.0 => -s,
                     PlaneSide::Above => 0.0,
                 };
-                Some(Residual::Plane { normal: n, correction })
+                Some(Residual::Plane {
+                    normal: n,
+                    correction,
+                })
             }
             Target::Orientation(q) => {
                 let target = frame.map_or(q, |(_, r)| r * q);
                 let current = *pose.rotations.get(usize::from(self.segment))?;
-                Some(Residual::Orientation(rotation_vector(target * current.conjugate())))
+                Some(Residual::Orientation(rotation_vector(
+                    target * current.conjugate(),
+                )))
             }
         }
     }
@@ -276,7 +314,10 @@ impl<const G: usize> GoalSet<G> {
     /// An empty set.
     #[must_use]
     pub const fn new() -> Self {
-        GoalSet { goals: [Goal::INACTIVE; G], len: 0 }
+        GoalSet {
+            goals: [Goal::INACTIVE; G],
+            len: 0,
+        }
     }
 
     /// Adds a goal; returns its index.
@@ -352,7 +393,10 @@ mod tests {
         let mut s = GoalSet::<2>::new();
         assert_eq!(s.push(Goal::reach(1, Vec3::ZERO, 1.0)), Ok(0));
         assert_eq!(s.push(Goal::reach(2, Vec3::ZERO, 1.0)), Ok(1));
-        assert_eq!(s.push(Goal::reach(3, Vec3::ZERO, 1.0)), Err(GoalError::Full));
+        assert_eq!(
+            s.push(Goal::reach(3, Vec3::ZERO, 1.0)),
+            Err(GoalError::Full)
+        );
         assert_eq!(s.len(), 2);
         s.get_mut(1).unwrap().weight = 0.0;
         assert!(!s.get(1).unwrap().is_active());
@@ -365,9 +409,16 @@ mod tests {
         let pose = rest_pose();
         // Rest: the left palm centre is at x = 0.02 + 0.16, y = 0.10 + 0.38 - 0.30 - 0.26 - 0.08.
         let palm = Vec3::new(0.18, -0.16, 0.0);
-        let g = Goal::reach(tempus::index::LEFT_HAND, palm + Vec3::new(0.0, 0.0, 0.3), 1.0);
+        let g = Goal::reach(
+            tempus::index::LEFT_HAND,
+            palm + Vec3::new(0.0, 0.0, 0.3),
+            1.0,
+        );
         let r = g.evaluate(&tempus::BODY, &pose).unwrap();
-        assert!((r.displacement() - Vec3::new(0.0, 0.0, 0.3)).length() < 1e-5, "{r:?}");
+        assert!(
+            (r.displacement() - Vec3::new(0.0, 0.0, 0.3)).length() < 1e-5,
+            "{r:?}"
+        );
         assert!((r.magnitude() - 0.3).abs() < 1e-5);
     }
 
@@ -377,14 +428,32 @@ mod tests {
         // At rest (root at the origin) the left foot's touch point is at
         // y = -0.05 - 0.42 - 0.40 - 0.08 = -0.95.
         let floor = |y, side| Goal::plane(tempus::index::LEFT_FOOT, Vec3::Y, y, side, 1.0);
-        let c = floor(-1.0, PlaneSide::Contact).evaluate(&tempus::BODY, &pose).unwrap();
-        assert!((c.displacement() - Vec3::new(0.0, -0.05, 0.0)).length() < 1e-5, "{c:?}");
-        let a = floor(-1.0, PlaneSide::Above).evaluate(&tempus::BODY, &pose).unwrap();
+        let c = floor(-1.0, PlaneSide::Contact)
+            .evaluate(&tempus::BODY, &pose)
+            .unwrap();
+        assert!(
+            (c.displacement() - Vec3::new(0.0, -0.05, 0.0)).length() < 1e-5,
+            "{c:?}"
+        );
+        let a = floor(-1.0, PlaneSide::Above)
+            .evaluate(&tempus::BODY, &pose)
+            .unwrap();
         assert_eq!(a.magnitude(), 0.0);
-        let b = floor(-0.7, PlaneSide::Above).evaluate(&tempus::BODY, &pose).unwrap();
-        assert!((b.displacement() - Vec3::new(0.0, 0.25, 0.0)).length() < 1e-5, "{b:?}");
+        let b = floor(-0.7, PlaneSide::Above)
+            .evaluate(&tempus::BODY, &pose)
+            .unwrap();
+        assert!(
+            (b.displacement() - Vec3::new(0.0, 0.25, 0.0)).length() < 1e-5,
+            "{b:?}"
+        );
         // A tilted plane: normal (1, 1, 0)/√2 through the origin.
-        let t = Goal::plane(tempus::index::LEFT_FOOT, Vec3::new(1.0, 1.0, 0.0), 0.0, PlaneSide::Contact, 1.0);
+        let t = Goal::plane(
+            tempus::index::LEFT_FOOT,
+            Vec3::new(1.0, 1.0, 0.0),
+            0.0,
+            PlaneSide::Contact,
+            1.0,
+        );
         let r = t.evaluate(&tempus::BODY, &pose).unwrap();
         let foot = Vec3::new(0.09, -0.95, 0.14);
         assert!((r.magnitude() - (foot.x + foot.y).abs() / 2f32.sqrt()).abs() < 1e-5);
@@ -395,7 +464,8 @@ mod tests {
         let pose = rest_pose();
         // A target at the origin of the left hand's frame, for the right hand:
         // the displacement is left wrist - right palm.
-        let g = Goal::reach(tempus::index::RIGHT_HAND, Vec3::ZERO, 1.0).in_frame(tempus::index::LEFT_HAND);
+        let g = Goal::reach(tempus::index::RIGHT_HAND, Vec3::ZERO, 1.0)
+            .in_frame(tempus::index::LEFT_HAND);
         let r = g.evaluate(&tempus::BODY, &pose).unwrap().displacement();
         assert!((r - Vec3::new(0.36, 0.08, 0.0)).length() < 1e-5, "{r}");
     }
@@ -404,9 +474,13 @@ mod tests {
     fn orientation_residual_is_the_rotation_vector() {
         let pose = rest_pose();
         let q = math::from_axis_angle(Vec3::Y, 0.5);
-        let r = Goal::orient(tempus::index::HEAD, q, 1.0).evaluate(&tempus::BODY, &pose).unwrap();
+        let r = Goal::orient(tempus::index::HEAD, q, 1.0)
+            .evaluate(&tempus::BODY, &pose)
+            .unwrap();
         match r {
-            Residual::Orientation(w) => assert!((w - Vec3::new(0.0, 0.5, 0.0)).length() < 1e-4, "{w}"),
+            Residual::Orientation(w) => {
+                assert!((w - Vec3::new(0.0, 0.5, 0.0)).length() < 1e-4, "{w}")
+            }
             _ => panic!("wrong residual kind"),
         }
         assert_eq!(r.displacement(), Vec3::ZERO);
@@ -415,7 +489,16 @@ mod tests {
     #[test]
     fn bad_indices_give_none() {
         let pose = rest_pose();
-        assert!(Goal::reach(40, Vec3::ZERO, 1.0).evaluate(&tempus::BODY, &pose).is_none());
-        assert!(Goal::reach(1, Vec3::ZERO, 1.0).in_frame(200).evaluate(&tempus::BODY, &pose).is_none());
+        assert!(
+            Goal::reach(40, Vec3::ZERO, 1.0)
+                .evaluate(&tempus::BODY, &pose)
+                .is_none()
+        );
+        assert!(
+            Goal::reach(1, Vec3::ZERO, 1.0)
+                .in_frame(200)
+                .evaluate(&tempus::BODY, &pose)
+                .is_none()
+        );
     }
 }

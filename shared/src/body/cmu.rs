@@ -97,24 +97,48 @@ const fn cmu(x: f32, y: f32, z: f32) -> Vec3 {
 
 /// Three DOFs in BVH order Z, Y, X with limits in degrees; `right` mirrors Z and Y.
 const fn zyx(z: (f32, f32), y: (f32, f32), x: (f32, f32), right: bool) -> Joint {
-    let (z, y) = if right { ((-z.1, -z.0), (-y.1, -y.0)) } else { (z, y) };
-    Joint::three(Dof::degrees(Axis::Z, z.0, z.1), Dof::degrees(Axis::Y, y.0, y.1), Dof::degrees(Axis::X, x.0, x.1))
+    let (z, y) = if right {
+        ((-z.1, -z.0), (-y.1, -y.0))
+    } else {
+        (z, y)
+    };
+    Joint::three(
+        Dof::degrees(Axis::Z, z.0, z.1),
+        Dof::degrees(Axis::Y, y.0, y.1),
+        Dof::degrees(Axis::X, x.0, x.1),
+    )
 }
 
-const fn seg(name: &'static str, parent: u8, origin: Vec3, joint: Joint, touch: Vec3) -> Segment<'static> {
-    Segment { name, parent, origin, joint, touch }
+const fn seg(
+    name: &'static str,
+    parent: u8,
+    origin: Vec3,
+    joint: Joint,
+    touch: Vec3,
+) -> Segment<'static> {
+    Segment {
+        name,
+        parent,
+        origin,
+        joint,
+        touch,
+    }
 }
 
-const HIP_JOINT: ((f32, f32), (f32, f32), (f32, f32)) = ((-20.0, 20.0), (-20.0, 20.0), (-20.0, 20.0));
+const HIP_JOINT: ((f32, f32), (f32, f32), (f32, f32)) =
+    ((-20.0, 20.0), (-20.0, 20.0), (-20.0, 20.0));
 const UP_LEG: ((f32, f32), (f32, f32), (f32, f32)) = ((-60.0, 45.0), (-45.0, 45.0), (-125.0, 35.0));
 const LEG: ((f32, f32), (f32, f32), (f32, f32)) = ((-30.0, 30.0), (-30.0, 30.0), (-5.0, 150.0));
 const FOOT: ((f32, f32), (f32, f32), (f32, f32)) = ((-30.0, 30.0), (-35.0, 35.0), (-40.0, 55.0));
 const TOE: ((f32, f32), (f32, f32), (f32, f32)) = ((-15.0, 15.0), (-20.0, 20.0), (-60.0, 40.0));
-const SHOULDER: ((f32, f32), (f32, f32), (f32, f32)) = ((-20.0, 25.0), (-25.0, 25.0), (-15.0, 15.0));
+const SHOULDER: ((f32, f32), (f32, f32), (f32, f32)) =
+    ((-20.0, 25.0), (-25.0, 25.0), (-15.0, 15.0));
 const ARM: ((f32, f32), (f32, f32), (f32, f32)) = ((-100.0, 95.0), (-85.0, 85.0), (-90.0, 90.0));
-const FORE_ARM: ((f32, f32), (f32, f32), (f32, f32)) = ((-10.0, 160.0), (-85.0, 10.0), (-120.0, 30.0));
+const FORE_ARM: ((f32, f32), (f32, f32), (f32, f32)) =
+    ((-10.0, 160.0), (-85.0, 10.0), (-120.0, 30.0));
 const HAND: ((f32, f32), (f32, f32), (f32, f32)) = ((-30.0, 30.0), (-30.0, 30.0), (-70.0, 70.0));
-const FINGER_BASE: ((f32, f32), (f32, f32), (f32, f32)) = ((-40.0, 40.0), (-40.0, 40.0), (-20.0, 20.0));
+const FINGER_BASE: ((f32, f32), (f32, f32), (f32, f32)) =
+    ((-40.0, 40.0), (-40.0, 40.0), (-20.0, 20.0));
 const THUMB: ((f32, f32), (f32, f32), (f32, f32)) = ((-20.0, 20.0), (-10.0, 60.0), (-10.0, 20.0));
 
 const fn side(j: ((f32, f32), (f32, f32), (f32, f32)), right: bool) -> Joint {
@@ -133,41 +157,231 @@ const R: bool = true;
 /// digits beyond `f32` precision).
 #[allow(clippy::excessive_precision)]
 pub const SEGMENTS: [Segment<'static>; SEGMENT_COUNT] = [
-    seg("Hips", NO_PARENT, cmu(0.0, 0.0, 0.0), Joint::FIXED, cmu(0.0, 0.0, 0.0)),
-    seg("LHipJoint", 0, cmu(0.0, 0.0, 0.0), side(HIP_JOINT, L), cmu(1.363060, -1.794630, 0.839290)),
-    seg("LeftUpLeg", 1, cmu(1.363060, -1.794630, 0.839290), side(UP_LEG, L), cmu(2.448110, -6.726130, 0.0)),
-    seg("LeftLeg", 2, cmu(2.448110, -6.726130, 0.0), side(LEG, L), cmu(2.562200, -7.039590, 0.0)),
-    seg("LeftFoot", 3, cmu(2.562200, -7.039590, 0.0), side(FOOT, L), cmu(0.157640, -0.433110, 2.322550)),
-    seg("LeftToeBase", 4, cmu(0.157640, -0.433110, 2.322550), side(TOE, L), cmu(0.0, 0.0, 0.0)),
-    seg("RHipJoint", 0, cmu(0.0, 0.0, 0.0), side(HIP_JOINT, R), cmu(-1.305520, -1.794630, 0.839290)),
-    seg("RightUpLeg", 6, cmu(-1.305520, -1.794630, 0.839290), side(UP_LEG, R), cmu(-2.542530, -6.985550, 0.0)),
-    seg("RightLeg", 7, cmu(-2.542530, -6.985550, 0.0), side(LEG, R), cmu(-2.568260, -7.056230, 0.0)),
-    seg("RightFoot", 8, cmu(-2.568260, -7.056230, 0.0), side(FOOT, R), cmu(-0.164730, -0.452590, 2.363150)),
-    seg("RightToeBase", 9, cmu(-0.164730, -0.452590, 2.363150), side(TOE, R), cmu(0.0, 0.0, 0.0)),
-    seg("LowerBack", 0, cmu(0.0, 0.0, 0.0), centre(((-30.0, 30.0), (-30.0, 30.0), (-30.0, 60.0))), cmu(0.028270, 2.035590, -0.193380)),
-    seg("Spine", 11, cmu(0.028270, 2.035590, -0.193380), centre(((-20.0, 20.0), (-20.0, 20.0), (-20.0, 30.0))), cmu(0.056720, 2.048850, -0.042750)),
-    seg("Spine1", 12, cmu(0.056720, 2.048850, -0.042750), centre(((-20.0, 20.0), (-20.0, 20.0), (-20.0, 30.0))), cmu(0.0, 0.0, 0.0)),
-    seg("Neck", 13, cmu(0.0, 0.0, 0.0), centre(((-30.0, 30.0), (-30.0, 30.0), (-45.0, 45.0))), cmu(-0.054170, 1.746240, 0.172020)),
-    seg("Neck1", 14, cmu(-0.054170, 1.746240, 0.172020), centre(((-30.0, 30.0), (-35.0, 35.0), (-40.0, 40.0))), cmu(0.104070, 1.761360, -0.123970)),
-    seg("Head", 15, cmu(0.104070, 1.761360, -0.123970), centre(((-30.0, 30.0), (-45.0, 45.0), (-40.0, 40.0))), cmu(0.0, 0.0, 0.0)),
-    seg("LeftShoulder", 13, cmu(0.0, 0.0, 0.0), side(SHOULDER, L), cmu(3.362410, 1.200890, -0.311210)),
-    seg("LeftArm", 17, cmu(3.362410, 1.200890, -0.311210), side(ARM, L), cmu(4.983000, 0.0, 0.0)),
-    seg("LeftForeArm", 18, cmu(4.983000, 0.0, 0.0), side(FORE_ARM, L), cmu(3.483560, 0.0, 0.0)),
-    seg("LeftHand", 19, cmu(3.483560, 0.0, 0.0), side(HAND, L), cmu(0.357630, 0.0, 0.0)),
-    seg("LeftFingerBase", 20, cmu(0.0, 0.0, 0.0), side(FINGER_BASE, L), cmu(0.715260, 0.0, 0.0)),
-    seg("LeftHandIndex1", 21, cmu(0.715260, 0.0, 0.0), INDEX, cmu(0.0, 0.0, 0.0)),
-    seg("LThumb", 20, cmu(0.0, 0.0, 0.0), side(THUMB, L), cmu(0.0, 0.0, 0.0)),
-    seg("RightShoulder", 13, cmu(0.0, 0.0, 0.0), side(SHOULDER, R), cmu(-3.136600, 1.374050, -0.404650)),
-    seg("RightArm", 24, cmu(-3.136600, 1.374050, -0.404650), side(ARM, R), cmu(-5.241900, 0.0, 0.0)),
-    seg("RightForeArm", 25, cmu(-5.241900, 0.0, 0.0), side(FORE_ARM, R), cmu(-3.444170, 0.0, 0.0)),
-    seg("RightHand", 26, cmu(-3.444170, 0.0, 0.0), side(HAND, R), cmu(-0.311265, 0.0, 0.0)),
-    seg("RightFingerBase", 27, cmu(0.0, 0.0, 0.0), side(FINGER_BASE, R), cmu(-0.622530, 0.0, 0.0)),
-    seg("RightHandIndex1", 28, cmu(-0.622530, 0.0, 0.0), INDEX, cmu(0.0, 0.0, 0.0)),
-    seg("RThumb", 27, cmu(0.0, 0.0, 0.0), side(THUMB, R), cmu(0.0, 0.0, 0.0)),
+    seg(
+        "Hips",
+        NO_PARENT,
+        cmu(0.0, 0.0, 0.0),
+        Joint::FIXED,
+        cmu(0.0, 0.0, 0.0),
+    ),
+    seg(
+        "LHipJoint",
+        0,
+        cmu(0.0, 0.0, 0.0),
+        side(HIP_JOINT, L),
+        cmu(1.363060, -1.794630, 0.839290),
+    ),
+    seg(
+        "LeftUpLeg",
+        1,
+        cmu(1.363060, -1.794630, 0.839290),
+        side(UP_LEG, L),
+        cmu(2.448110, -6.726130, 0.0),
+    ),
+    seg(
+        "LeftLeg",
+        2,
+        cmu(2.448110, -6.726130, 0.0),
+        side(LEG, L),
+        cmu(2.562200, -7.039590, 0.0),
+    ),
+    seg(
+        "LeftFoot",
+        3,
+        cmu(2.562200, -7.039590, 0.0),
+        side(FOOT, L),
+        cmu(0.157640, -0.433110, 2.322550),
+    ),
+    seg(
+        "LeftToeBase",
+        4,
+        cmu(0.157640, -0.433110, 2.322550),
+        side(TOE, L),
+        cmu(0.0, 0.0, 0.0),
+    ),
+    seg(
+        "RHipJoint",
+        0,
+        cmu(0.0, 0.0, 0.0),
+        side(HIP_JOINT, R),
+        cmu(-1.305520, -1.794630, 0.839290),
+    ),
+    seg(
+        "RightUpLeg",
+        6,
+        cmu(-1.305520, -1.794630, 0.839290),
+        side(UP_LEG, R),
+        cmu(-2.542530, -6.985550, 0.0),
+    ),
+    seg(
+        "RightLeg",
+        7,
+        cmu(-2.542530, -6.985550, 0.0),
+        side(LEG, R),
+        cmu(-2.568260, -7.056230, 0.0),
+    ),
+    seg(
+        "RightFoot",
+        8,
+        cmu(-2.568260, -7.056230, 0.0),
+        side(FOOT, R),
+        cmu(-0.164730, -0.452590, 2.363150),
+    ),
+    seg(
+        "RightToeBase",
+        9,
+        cmu(-0.164730, -0.452590, 2.363150),
+        side(TOE, R),
+        cmu(0.0, 0.0, 0.0),
+    ),
+    seg(
+        "LowerBack",
+        0,
+        cmu(0.0, 0.0, 0.0),
+        centre(((-30.0, 30.0), (-30.0, 30.0), (-30.0, 60.0))),
+        cmu(0.028270, 2.035590, -0.193380),
+    ),
+    seg(
+        "Spine",
+        11,
+        cmu(0.028270, 2.035590, -0.193380),
+        centre(((-20.0, 20.0), (-20.0, 20.0), (-20.0, 30.0))),
+        cmu(0.056720, 2.048850, -0.042750),
+    ),
+    seg(
+        "Spine1",
+        12,
+        cmu(0.056720, 2.048850, -0.042750),
+        centre(((-20.0, 20.0), (-20.0, 20.0), (-20.0, 30.0))),
+        cmu(0.0, 0.0, 0.0),
+    ),
+    seg(
+        "Neck",
+        13,
+        cmu(0.0, 0.0, 0.0),
+        centre(((-30.0, 30.0), (-30.0, 30.0), (-45.0, 45.0))),
+        cmu(-0.054170, 1.746240, 0.172020),
+    ),
+    seg(
+        "Neck1",
+        14,
+        cmu(-0.054170, 1.746240, 0.172020),
+        centre(((-30.0, 30.0), (-35.0, 35.0), (-40.0, 40.0))),
+        cmu(0.104070, 1.761360, -0.123970),
+    ),
+    seg(
+        "Head",
+        15,
+        cmu(0.104070, 1.761360, -0.123970),
+        centre(((-30.0, 30.0), (-45.0, 45.0), (-40.0, 40.0))),
+        cmu(0.0, 0.0, 0.0),
+    ),
+    seg(
+        "LeftShoulder",
+        13,
+        cmu(0.0, 0.0, 0.0),
+        side(SHOULDER, L),
+        cmu(3.362410, 1.200890, -0.311210),
+    ),
+    seg(
+        "LeftArm",
+        17,
+        cmu(3.362410, 1.200890, -0.311210),
+        side(ARM, L),
+        cmu(4.983000, 0.0, 0.0),
+    ),
+    seg(
+        "LeftForeArm",
+        18,
+        cmu(4.983000, 0.0, 0.0),
+        side(FORE_ARM, L),
+        cmu(3.483560, 0.0, 0.0),
+    ),
+    seg(
+        "LeftHand",
+        19,
+        cmu(3.483560, 0.0, 0.0),
+        side(HAND, L),
+        cmu(0.357630, 0.0, 0.0),
+    ),
+    seg(
+        "LeftFingerBase",
+        20,
+        cmu(0.0, 0.0, 0.0),
+        side(FINGER_BASE, L),
+        cmu(0.715260, 0.0, 0.0),
+    ),
+    seg(
+        "LeftHandIndex1",
+        21,
+        cmu(0.715260, 0.0, 0.0),
+        INDEX,
+        cmu(0.0, 0.0, 0.0),
+    ),
+    seg(
+        "LThumb",
+        20,
+        cmu(0.0, 0.0, 0.0),
+        side(THUMB, L),
+        cmu(0.0, 0.0, 0.0),
+    ),
+    seg(
+        "RightShoulder",
+        13,
+        cmu(0.0, 0.0, 0.0),
+        side(SHOULDER, R),
+        cmu(-3.136600, 1.374050, -0.404650),
+    ),
+    seg(
+        "RightArm",
+        24,
+        cmu(-3.136600, 1.374050, -0.404650),
+        side(ARM, R),
+        cmu(-5.241900, 0.0, 0.0),
+    ),
+    seg(
+        "RightForeArm",
+        25,
+        cmu(-5.241900, 0.0, 0.0),
+        side(FORE_ARM, R),
+        cmu(-3.444170, 0.0, 0.0),
+    ),
+    seg(
+        "RightHand",
+        26,
+        cmu(-3.444170, 0.0, 0.0),
+        side(HAND, R),
+        cmu(-0.311265, 0.0, 0.0),
+    ),
+    seg(
+        "RightFingerBase",
+        27,
+        cmu(0.0, 0.0, 0.0),
+        side(FINGER_BASE, R),
+        cmu(-0.622530, 0.0, 0.0),
+    ),
+    seg(
+        "RightHandIndex1",
+        28,
+        cmu(-0.622530, 0.0, 0.0),
+        INDEX,
+        cmu(0.0, 0.0, 0.0),
+    ),
+    seg(
+        "RThumb",
+        27,
+        cmu(0.0, 0.0, 0.0),
+        side(THUMB, R),
+        cmu(0.0, 0.0, 0.0),
+    ),
 ];
 
 const PARENTS: [u8; SEGMENT_COUNT] = parents_of(&SEGMENTS);
 const OFFSETS: [Vec3; SEGMENT_COUNT] = offsets_of(&SEGMENTS);
 
 /// The CMU skeleton.
-pub const BODY: Body<'static> = Body { segments: &SEGMENTS, parents: &PARENTS, offsets: &OFFSETS };
+pub const BODY: Body<'static> = Body {
+    segments: &SEGMENTS,
+    parents: &PARENTS,
+    offsets: &OFFSETS,
+};

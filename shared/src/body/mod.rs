@@ -113,7 +113,11 @@ impl Dof {
     #[must_use]
     pub const fn degrees(axis: Axis, min: f32, max: f32) -> Self {
         const K: f32 = core::f32::consts::PI / 180.0;
-        Dof { axis, min: min * K, max: max * K }
+        Dof {
+            axis,
+            min: min * K,
+            max: max * K,
+        }
     }
 
     /// `value` clamped to the limits (NaN becomes `min`).
@@ -154,24 +158,36 @@ pub struct Joint {
 
 impl Joint {
     /// A rigid joint (no degree of freedom).
-    pub const FIXED: Joint = Joint { dofs: [UNUSED_DOF; 3], count: 0 };
+    pub const FIXED: Joint = Joint {
+        dofs: [UNUSED_DOF; 3],
+        count: 0,
+    };
 
     /// A hinge.
     #[must_use]
     pub const fn one(a: Dof) -> Self {
-        Joint { dofs: [a, UNUSED_DOF, UNUSED_DOF], count: 1 }
+        Joint {
+            dofs: [a, UNUSED_DOF, UNUSED_DOF],
+            count: 1,
+        }
     }
 
     /// Two degrees of freedom, `a` then `b` (axes must differ).
     #[must_use]
     pub const fn two(a: Dof, b: Dof) -> Self {
-        Joint { dofs: [a, b, UNUSED_DOF], count: 2 }
+        Joint {
+            dofs: [a, b, UNUSED_DOF],
+            count: 2,
+        }
     }
 
     /// Three degrees of freedom, `a`, `b`, then `c` (a permutation of X, Y, Z).
     #[must_use]
     pub const fn three(a: Dof, b: Dof, c: Dof) -> Self {
-        Joint { dofs: [a, b, c], count: 3 }
+        Joint {
+            dofs: [a, b, c],
+            count: 3,
+        }
     }
 
     /// The degrees of freedom in order.
@@ -192,7 +208,9 @@ impl Joint {
     #[must_use]
     pub fn is_valid(&self) -> bool {
         let d = self.dofs();
-        let ordered = d.iter().all(|f| f.min <= f.max && f.min >= -TAU && f.max <= TAU);
+        let ordered = d
+            .iter()
+            .all(|f| f.min <= f.max && f.min >= -TAU && f.max <= TAU);
         let distinct = match d {
             [a, b] => a.axis != b.axis,
             [a, b, c] => a.axis != b.axis && b.axis != c.axis && a.axis != c.axis,
@@ -205,7 +223,10 @@ impl Joint {
     /// (unused entries are ignored).
     #[must_use]
     pub fn rotation(&self, values: &[f32; 3]) -> Quat {
-        self.dofs().iter().zip(values).fold(Quat::IDENTITY, |q, (d, &v)| q * d.axis.rotation(v))
+        self.dofs()
+            .iter()
+            .zip(values)
+            .fold(Quat::IDENTITY, |q, (d, &v)| q * d.axis.rotation(v))
     }
 
     /// `values` clamped to the limits; unused entries set to 0.
@@ -221,7 +242,10 @@ impl Joint {
     /// How far `values` lie outside the limits (largest excess, radians).
     #[must_use]
     pub fn excess(&self, values: &[f32; 3]) -> f32 {
-        self.dofs().iter().zip(values).fold(0.0, |m, (d, &v)| if d.excess(v) > m { d.excess(v) } else { m })
+        self.dofs().iter().zip(values).fold(
+            0.0,
+            |m, (d, &v)| if d.excess(v) > m { d.excess(v) } else { m },
+        )
     }
 
     /// Projects an arbitrary relative rotation onto this joint's degrees of freedom
@@ -241,7 +265,9 @@ impl Joint {
                 let q = if q.w < 0.0 { -q } else { q };
                 self.clamp(&[2.0 * math::atan2(a.axis.component(q.xyz()), q.w), 0.0, 0.0])
             }
-            [a, b, _] if self.count == 2 => self.best_euler(euler(q, a.axis, b.axis, a.axis.third(b.axis))),
+            [a, b, _] if self.count == 2 => {
+                self.best_euler(euler(q, a.axis, b.axis, a.axis.third(b.axis)))
+            }
             [a, b, c] if self.count == 3 => self.best_euler(euler(q, a.axis, b.axis, c.axis)),
             _ => [0.0; 3],
         }
@@ -249,8 +275,13 @@ impl Joint {
 
     /// Of the two Euler solutions, the clamped one that moves least from the exact one.
     fn best_euler(&self, (first, second): ([f32; 3], [f32; 3])) -> [f32; 3] {
-        let cost = |v: &[f32; 3]| -> f32 { self.dofs().iter().zip(v).map(|(d, &x)| d.excess(x)).sum() };
-        if cost(&second) < cost(&first) { self.clamp(&second) } else { self.clamp(&first) }
+        let cost =
+            |v: &[f32; 3]| -> f32 { self.dofs().iter().zip(v).map(|(d, &x)| d.excess(x)).sum() };
+        if cost(&second) < cost(&first) {
+            self.clamp(&second)
+        } else {
+            self.clamp(&first)
+        }
     }
 }
 
@@ -283,7 +314,10 @@ pub fn wrap_angle(a: f32) -> f32 {
 #[must_use]
 pub fn euler(q: Quat, i: Axis, j: Axis, k: Axis) -> ([f32; 3], [f32; 3]) {
     let m = Mat3::from_quat(q);
-    let even = matches!((i, j), (Axis::X, Axis::Y) | (Axis::Y, Axis::Z) | (Axis::Z, Axis::X));
+    let even = matches!(
+        (i, j),
+        (Axis::X, Axis::Y) | (Axis::Y, Axis::Z) | (Axis::Z, Axis::X)
+    );
     let s = if even { 1.0 } else { -1.0 };
     let sb = (s * element(&m, i, k)).clamp(-1.0, 1.0);
     let beta = math::asin(sb);
@@ -297,7 +331,11 @@ pub fn euler(q: Quat, i: Axis, j: Axis, k: Axis) -> ([f32; 3], [f32; 3]) {
         )
     };
     let first = [alpha, beta, gamma];
-    let second = [wrap_angle(alpha + PI), wrap_angle(PI - beta), wrap_angle(gamma + PI)];
+    let second = [
+        wrap_angle(alpha + PI),
+        wrap_angle(PI - beta),
+        wrap_angle(gamma + PI),
+    ];
     (first, second)
 }
 
@@ -382,21 +420,30 @@ impl<'a> Body<'a> {
     /// The index of the segment with this name.
     #[must_use]
     pub fn find(&self, name: &str) -> Option<u8> {
-        self.segments.iter().position(|s| s.name == name).and_then(|i| u8::try_from(i).ok())
+        self.segments
+            .iter()
+            .position(|s| s.name == name)
+            .and_then(|i| u8::try_from(i).ok())
     }
 
     /// The parent of a segment (`None` for the root or an unknown index).
     #[inline]
     #[must_use]
     pub fn parent(&self, index: usize) -> Option<usize> {
-        self.parents.get(index).filter(|&&p| p != NO_PARENT).map(|&p| usize::from(p))
+        self.parents
+            .get(index)
+            .filter(|&&p| p != NO_PARENT)
+            .map(|&p| usize::from(p))
     }
 
     /// The hierarchy view that [`pose::forward`] needs.
     #[inline]
     #[must_use]
     pub fn hierarchy(&self) -> Hierarchy<'a> {
-        Hierarchy { parents: self.parents, offsets: self.offsets }
+        Hierarchy {
+            parents: self.parents,
+            offsets: self.offsets,
+        }
     }
 
     /// Checks the structure: non-empty, at most [`MAX_SEGMENTS`], consistent
@@ -412,7 +459,13 @@ impl<'a> Body<'a> {
         if self.parents.len() != n || self.offsets.len() != n {
             return Err(BodyError::Inconsistent);
         }
-        for (i, ((s, &p), &o)) in self.segments.iter().zip(self.parents).zip(self.offsets).enumerate() {
+        for (i, ((s, &p), &o)) in self
+            .segments
+            .iter()
+            .zip(self.parents)
+            .zip(self.offsets)
+            .enumerate()
+        {
             let id = u8::try_from(i).unwrap_or(u8::MAX);
             if s.parent != p || s.origin != o {
                 return Err(BodyError::Inconsistent);
@@ -499,7 +552,12 @@ impl<const N: usize> Angles<N> {
         if body.len() > N {
             return Err(BodyError::TooManySegments);
         }
-        let mut a = Angles { count: body.len(), root_position: Vec3::ZERO, root_rotation: Quat::IDENTITY, values: [[0.0; 3]; N] };
+        let mut a = Angles {
+            count: body.len(),
+            root_position: Vec3::ZERO,
+            root_rotation: Quat::IDENTITY,
+            values: [[0.0; 3]; N],
+        };
         a.clamp_to_limits(body);
         Ok(a)
     }
@@ -514,7 +572,11 @@ impl<const N: usize> Angles<N> {
     /// The angles of a segment, mutably.
     #[inline]
     pub fn get_mut(&mut self, segment: usize) -> Option<&mut [f32; 3]> {
-        if segment < self.count { self.values.get_mut(segment) } else { None }
+        if segment < self.count {
+            self.values.get_mut(segment)
+        } else {
+            None
+        }
     }
 
     /// Clamps every angle into its joint's limits (unused entries become 0).
@@ -527,10 +589,14 @@ impl<const N: usize> Angles<N> {
     /// The largest amount (radians) by which any angle exceeds its limits.
     #[must_use]
     pub fn limit_excess(&self, body: &Body<'_>) -> f32 {
-        self.values.iter().zip(body.segments).skip(1).fold(0.0, |m, (v, s)| {
-            let e = s.joint.excess(v);
-            if e > m || e.is_nan() { e } else { m }
-        })
+        self.values
+            .iter()
+            .zip(body.segments)
+            .skip(1)
+            .fold(0.0, |m, (v, s)| {
+                let e = s.joint.excess(v);
+                if e > m || e.is_nan() { e } else { m }
+            })
     }
 
     fn check(&self, body: &Body<'_>) -> Result<(), BodyError> {
@@ -548,14 +614,29 @@ impl<const N: usize> Angles<N> {
         self.check(body)?;
         out.count = self.count;
         out.root_position = self.root_position;
-        for (i, ((r, v), s)) in out.rotations.iter_mut().zip(&self.values).zip(body.segments).enumerate() {
-            *r = if i == 0 { self.root_rotation } else { s.joint.rotation(v) };
+        for (i, ((r, v), s)) in out
+            .rotations
+            .iter_mut()
+            .zip(&self.values)
+            .zip(body.segments)
+            .enumerate()
+        {
+            *r = if i == 0 {
+                self.root_rotation
+            } else {
+                s.joint.rotation(v)
+            };
         }
         Ok(())
     }
 
     /// World transforms of these angles via [`pose::forward`]; `local` is scratch.
-    pub fn forward(&self, body: &Body<'_>, local: &mut LocalPose<N>, out: &mut Pose<N>) -> Result<(), BodyError> {
+    pub fn forward(
+        &self,
+        body: &Body<'_>,
+        local: &mut LocalPose<N>,
+        out: &mut Pose<N>,
+    ) -> Result<(), BodyError> {
         self.to_local(body, local)?;
         pose::forward(&body.hierarchy(), local, out)?;
         Ok(())
@@ -571,7 +652,13 @@ impl<const N: usize> Angles<N> {
         }
         a.root_position = local.root_position;
         a.root_rotation = local.rotations.first().copied().unwrap_or(Quat::IDENTITY);
-        for ((v, s), &q) in a.values.iter_mut().zip(body.segments).zip(&local.rotations).skip(1) {
+        for ((v, s), &q) in a
+            .values
+            .iter_mut()
+            .zip(body.segments)
+            .zip(&local.rotations)
+            .skip(1)
+        {
             *v = s.joint.project(q);
         }
         Ok(a)
@@ -615,7 +702,13 @@ mod tests {
     fn euler_round_trips_all_orders() {
         let wide = |a| Dof::new(a, -PI, PI);
         let mid = |a| Dof::new(a, -1.5, 1.5);
-        let samples = [[0.3, -1.2, 2.5], [-2.9, 1.4, -0.1], [1.0, 0.0, -1.0], [0.0, 1.5, 0.7], [3.0, -0.2, 3.1]];
+        let samples = [
+            [0.3, -1.2, 2.5],
+            [-2.9, 1.4, -0.1],
+            [1.0, 0.0, -1.0],
+            [0.0, 1.5, 0.7],
+            [3.0, -0.2, 3.1],
+        ];
         for o in ORDERS {
             let j = Joint::three(wide(o[0]), mid(o[1]), wide(o[2]));
             for v in samples {
@@ -631,7 +724,11 @@ mod tests {
     #[test]
     fn euler_at_gimbal_lock_reproduces_rotation() {
         for o in ORDERS {
-            let j = Joint::three(Dof::new(o[0], -3.2, 3.2), Dof::new(o[1], -3.2, 3.2), Dof::new(o[2], -3.2, 3.2));
+            let j = Joint::three(
+                Dof::new(o[0], -3.2, 3.2),
+                Dof::new(o[1], -3.2, 3.2),
+                Dof::new(o[2], -3.2, 3.2),
+            );
             for beta in [core::f32::consts::FRAC_PI_2, -core::f32::consts::FRAC_PI_2] {
                 let q = j.rotation(&[0.4, beta, -0.3]);
                 let back = j.rotation(&j.project(q));
@@ -653,7 +750,10 @@ mod tests {
 
     #[test]
     fn projection_clamps_to_limits() {
-        let j = Joint::two(Dof::degrees(Axis::X, 0.0, 90.0), Dof::degrees(Axis::Z, -10.0, 10.0));
+        let j = Joint::two(
+            Dof::degrees(Axis::X, 0.0, 90.0),
+            Dof::degrees(Axis::Z, -10.0, 10.0),
+        );
         let p = j.project(Axis::X.rotation(-0.5) * Axis::Z.rotation(0.5));
         assert!(close(p[0], 0.0, 1e-6) && close(p[1], 10f32.to_radians(), 1e-6));
     }
@@ -661,16 +761,30 @@ mod tests {
     #[test]
     fn projection_prefers_the_euler_solution_inside_limits() {
         // β beyond 90° is only representable by the second solution.
-        let j = Joint::three(Dof::new(Axis::Z, -3.2, 3.2), Dof::new(Axis::Y, 1.2, 3.0), Dof::new(Axis::X, -3.2, 3.2));
+        let j = Joint::three(
+            Dof::new(Axis::Z, -3.2, 3.2),
+            Dof::new(Axis::Y, 1.2, 3.0),
+            Dof::new(Axis::X, -3.2, 3.2),
+        );
         let v = [0.2, 2.0, -0.4];
         let p = j.project(j.rotation(&v));
-        assert!(rotation_distance(j.rotation(&v), j.rotation(&p)) < 2e-3, "{p:?}");
+        assert!(
+            rotation_distance(j.rotation(&v), j.rotation(&p)) < 2e-3,
+            "{p:?}"
+        );
         assert!(close(p[1], 2.0, 2e-3));
     }
 
     #[test]
     fn joint_validity() {
-        assert!(Joint::three(Dof::new(Axis::X, -1.0, 1.0), Dof::new(Axis::Y, -1.0, 1.0), Dof::new(Axis::Z, -1.0, 1.0)).is_valid());
+        assert!(
+            Joint::three(
+                Dof::new(Axis::X, -1.0, 1.0),
+                Dof::new(Axis::Y, -1.0, 1.0),
+                Dof::new(Axis::Z, -1.0, 1.0)
+            )
+            .is_valid()
+        );
         assert!(!Joint::two(Dof::new(Axis::X, -1.0, 1.0), Dof::new(Axis::X, -1.0, 1.0)).is_valid());
         assert!(!Joint::one(Dof::new(Axis::X, 1.0, -1.0)).is_valid());
     }

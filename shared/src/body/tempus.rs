@@ -96,54 +96,198 @@ const fn m(dof: Dof) -> Dof {
     }
 }
 
-const fn seg(name: &'static str, parent: u8, origin: Vec3, joint: Joint, touch: Vec3) -> Segment<'static> {
-    Segment { name, parent, origin, joint, touch }
+const fn seg(
+    name: &'static str,
+    parent: u8,
+    origin: Vec3,
+    joint: Joint,
+    touch: Vec3,
+) -> Segment<'static> {
+    Segment {
+        name,
+        parent,
+        origin,
+        joint,
+        touch,
+    }
 }
 
-const SPINE: Joint = Joint::three(d(Axis::X, -30.0, 70.0), d(Axis::Z, -35.0, 35.0), d(Axis::Y, -40.0, 40.0));
-const NECK: Joint = Joint::three(d(Axis::X, -45.0, 60.0), d(Axis::Z, -40.0, 40.0), d(Axis::Y, -60.0, 60.0));
-const HEAD: Joint = Joint::three(d(Axis::X, -30.0, 30.0), d(Axis::Z, -20.0, 20.0), d(Axis::Y, -30.0, 30.0));
+const SPINE: Joint = Joint::three(
+    d(Axis::X, -30.0, 70.0),
+    d(Axis::Z, -35.0, 35.0),
+    d(Axis::Y, -40.0, 40.0),
+);
+const NECK: Joint = Joint::three(
+    d(Axis::X, -45.0, 60.0),
+    d(Axis::Z, -40.0, 40.0),
+    d(Axis::Y, -60.0, 60.0),
+);
+const HEAD: Joint = Joint::three(
+    d(Axis::X, -30.0, 30.0),
+    d(Axis::Z, -20.0, 20.0),
+    d(Axis::Y, -30.0, 30.0),
+);
 
 const CLAVICLE_L: [Dof; 2] = [d(Axis::Z, -10.0, 30.0), d(Axis::Y, -25.0, 25.0)];
-const UPPER_ARM_L: [Dof; 3] = [d(Axis::X, -170.0, 60.0), d(Axis::Z, -30.0, 90.0), d(Axis::Y, -90.0, 90.0)];
+const UPPER_ARM_L: [Dof; 3] = [
+    d(Axis::X, -170.0, 60.0),
+    d(Axis::Z, -30.0, 90.0),
+    d(Axis::Y, -90.0, 90.0),
+];
 const LOWER_ARM_L: [Dof; 2] = [d(Axis::X, -150.0, 0.0), d(Axis::Y, -80.0, 80.0)];
 const HAND_L: [Dof; 2] = [d(Axis::Z, -80.0, 70.0), d(Axis::X, -30.0, 20.0)];
-const UPPER_LEG_L: [Dof; 3] = [d(Axis::X, -120.0, 30.0), d(Axis::Z, -30.0, 45.0), d(Axis::Y, -45.0, 45.0)];
+const UPPER_LEG_L: [Dof; 3] = [
+    d(Axis::X, -120.0, 30.0),
+    d(Axis::Z, -30.0, 45.0),
+    d(Axis::Y, -45.0, 45.0),
+];
 const LOWER_LEG: Dof = d(Axis::X, 0.0, 150.0);
-const FOOT_L: [Dof; 3] = [d(Axis::X, -30.0, 50.0), d(Axis::Z, -25.0, 35.0), d(Axis::Y, -25.0, 25.0)];
+const FOOT_L: [Dof; 3] = [
+    d(Axis::X, -30.0, 50.0),
+    d(Axis::Z, -25.0, 35.0),
+    d(Axis::Y, -25.0, 25.0),
+];
 
 const fn two(a: [Dof; 2], mirror: bool) -> Joint {
-    if mirror { Joint::two(m(a[0]), m(a[1])) } else { Joint::two(a[0], a[1]) }
+    if mirror {
+        Joint::two(m(a[0]), m(a[1]))
+    } else {
+        Joint::two(a[0], a[1])
+    }
 }
 
 const fn three(a: [Dof; 3], mirror: bool) -> Joint {
-    if mirror { Joint::three(m(a[0]), m(a[1]), m(a[2])) } else { Joint::three(a[0], a[1], a[2]) }
+    if mirror {
+        Joint::three(m(a[0]), m(a[1]), m(a[2]))
+    } else {
+        Joint::three(a[0], a[1], a[2])
+    }
 }
 
 /// The segment table.
 pub const SEGMENTS: [Segment<'static>; SEGMENT_COUNT] = [
-    seg("lower_torso", NO_PARENT, v(0.0, 0.0, 0.0), Joint::FIXED, v(0.0, 0.0, 0.0)),
-    seg("upper_torso", 0, v(0.0, 0.10, 0.0), SPINE, v(0.0, 0.42, 0.0)),
+    seg(
+        "lower_torso",
+        NO_PARENT,
+        v(0.0, 0.0, 0.0),
+        Joint::FIXED,
+        v(0.0, 0.0, 0.0),
+    ),
+    seg(
+        "upper_torso",
+        0,
+        v(0.0, 0.10, 0.0),
+        SPINE,
+        v(0.0, 0.42, 0.0),
+    ),
     seg("neck", 1, v(0.0, 0.42, 0.0), NECK, v(0.0, 0.10, 0.0)),
     seg("head", 2, v(0.0, 0.10, 0.0), HEAD, v(0.0, 0.10, 0.0)),
-    seg("left_shoulder", 1, v(0.02, 0.38, 0.0), two(CLAVICLE_L, false), v(0.16, 0.0, 0.0)),
-    seg("left_upper_arm", 4, v(0.16, 0.0, 0.0), three(UPPER_ARM_L, false), v(0.0, -0.30, 0.0)),
-    seg("left_lower_arm", 5, v(0.0, -0.30, 0.0), two(LOWER_ARM_L, false), v(0.0, -0.26, 0.0)),
-    seg("left_hand", 6, v(0.0, -0.26, 0.0), two(HAND_L, false), v(0.0, -0.08, 0.0)),
-    seg("right_shoulder", 1, v(-0.02, 0.38, 0.0), two(CLAVICLE_L, true), v(-0.16, 0.0, 0.0)),
-    seg("right_upper_arm", 8, v(-0.16, 0.0, 0.0), three(UPPER_ARM_L, true), v(0.0, -0.30, 0.0)),
-    seg("right_lower_arm", 9, v(0.0, -0.30, 0.0), two(LOWER_ARM_L, true), v(0.0, -0.26, 0.0)),
-    seg("right_hand", 10, v(0.0, -0.26, 0.0), two(HAND_L, true), v(0.0, -0.08, 0.0)),
-    seg("left_upper_leg", 0, v(0.09, -0.05, 0.0), three(UPPER_LEG_L, false), v(0.0, -0.42, 0.0)),
-    seg("left_lower_leg", 12, v(0.0, -0.42, 0.0), Joint::one(LOWER_LEG), v(0.0, -0.40, 0.0)),
-    seg("left_foot", 13, v(0.0, -0.40, 0.0), three(FOOT_L, false), v(0.0, -0.08, 0.14)),
-    seg("right_upper_leg", 0, v(-0.09, -0.05, 0.0), three(UPPER_LEG_L, true), v(0.0, -0.42, 0.0)),
-    seg("right_lower_leg", 15, v(0.0, -0.42, 0.0), Joint::one(LOWER_LEG), v(0.0, -0.40, 0.0)),
-    seg("right_foot", 16, v(0.0, -0.40, 0.0), three(FOOT_L, true), v(0.0, -0.08, 0.14)),
+    seg(
+        "left_shoulder",
+        1,
+        v(0.02, 0.38, 0.0),
+        two(CLAVICLE_L, false),
+        v(0.16, 0.0, 0.0),
+    ),
+    seg(
+        "left_upper_arm",
+        4,
+        v(0.16, 0.0, 0.0),
+        three(UPPER_ARM_L, false),
+        v(0.0, -0.30, 0.0),
+    ),
+    seg(
+        "left_lower_arm",
+        5,
+        v(0.0, -0.30, 0.0),
+        two(LOWER_ARM_L, false),
+        v(0.0, -0.26, 0.0),
+    ),
+    seg(
+        "left_hand",
+        6,
+        v(0.0, -0.26, 0.0),
+        two(HAND_L, false),
+        v(0.0, -0.08, 0.0),
+    ),
+    seg(
+        "right_shoulder",
+        1,
+        v(-0.02, 0.38, 0.0),
+        two(CLAVICLE_L, true),
+        v(-0.16, 0.0, 0.0),
+    ),
+    seg(
+        "right_upper_arm",
+        8,
+        v(-0.16, 0.0, 0.0),
+        three(UPPER_ARM_L, true),
+        v(0.0, -0.30, 0.0),
+    ),
+    seg(
+        "right_lower_arm",
+        9,
+        v(0.0, -0.30, 0.0),
+        two(LOWER_ARM_L, true),
+        v(0.0, -0.26, 0.0),
+    ),
+    seg(
+        "right_hand",
+        10,
+        v(0.0, -0.26, 0.0),
+        two(HAND_L, true),
+        v(0.0, -0.08, 0.0),
+    ),
+    seg(
+        "left_upper_leg",
+        0,
+        v(0.09, -0.05, 0.0),
+        three(UPPER_LEG_L, false),
+        v(0.0, -0.42, 0.0),
+    ),
+    seg(
+        "left_lower_leg",
+        12,
+        v(0.0, -0.42, 0.0),
+        Joint::one(LOWER_LEG),
+        v(0.0, -0.40, 0.0),
+    ),
+    seg(
+        "left_foot",
+        13,
+        v(0.0, -0.40, 0.0),
+        three(FOOT_L, false),
+        v(0.0, -0.08, 0.14),
+    ),
+    seg(
+        "right_upper_leg",
+        0,
+        v(-0.09, -0.05, 0.0),
+        three(UPPER_LEG_L, true),
+        v(0.0, -0.42, 0.0),
+    ),
+    seg(
+        "right_lower_leg",
+        15,
+        v(0.0, -0.42, 0.0),
+        Joint::one(LOWER_LEG),
+        v(0.0, -0.40, 0.0),
+    ),
+    seg(
+        "right_foot",
+        16,
+        v(0.0, -0.40, 0.0),
+        three(FOOT_L, true),
+        v(0.0, -0.08, 0.14),
+    ),
 ];
 
 const PARENTS: [u8; SEGMENT_COUNT] = parents_of(&SEGMENTS);
 const OFFSETS: [Vec3; SEGMENT_COUNT] = offsets_of(&SEGMENTS);
 
 /// The TEMPUS-like humanoid.
-pub const BODY: Body<'static> = Body { segments: &SEGMENTS, parents: &PARENTS, offsets: &OFFSETS };
+pub const BODY: Body<'static> = Body {
+    segments: &SEGMENTS,
+    parents: &PARENTS,
+    offsets: &OFFSETS,
+};

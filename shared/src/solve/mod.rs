@@ -1,0 +1,333 @@
+//! Multi-goal weighted positioning of an articulated body (POSIT, and beyond).
+//!
+//! Badler, Manoochehri & Walters (1987) position a body so that weighted goals
+//! are met as well as possible, like springs of stiffness `weight` pulling touch
+//! points towards goals. This module implements their method and better ones on
+//! the same problem, selected by [`Solver::method`]:
+//!
+//! - [`Method::Greedy`]: the paper, kept faithful. The [`ReachTree`] (Fig. 15)
+//!   is balanced recursively (Fig. 17): after balancing its children, a node's
+//!   subtree-weighted displacement `stwd = Σ w·(goal − touch point)` gives a
+//!   temporary goal `touch + stwd / Σw` for the node, which `solve_simple_chain`
+//!   reaches by moving the simple chain from the node's reach parent; the root
+//!   node is simply translated. A node stops on zero displacement, when the
+//!   displacement no longer shrinks, or at the iteration cap. The chain solver is
+//!   the paper's greedy triangle-inequality one, with joint limits added.
+//! - [`Method::Ccd`], [`Method::Dls`]: the same balancing with a better chain
+//!   solver (cyclic coordinate descent per DOF, or damped least squares).
+//! - [`Method::TreeDls`]: damped least squares (Levenberg–Marquardt) on all the
+//!   reach tree's joints at once, minimising `Σ w·residual²` directly, with an
+//!   active set for the joint limits. This is the default: it reaches the
+//!   weighted optimum that the spring model describes, handles orientation,
+//!   plane and relative goals exactly, and is the cheapest per frame.
+//!
+//! Every method starts from the given [`Angles`] (warm start: the synthesized
+//! pose projected with [`Angles::from_local`], or the previous frame), keeps
+//! every angle within its limits, never changes the root's orientation, and is
+//! deterministic (only [`crate::math`] transcendentals, fixed iteration order).
+//!
+//! ## What moves
+//!
+//! Only the joints of the reach tree's simple chains (goal-less side branches
+//! ride along rigidly). The root of the reach tree is handled by
+//! [`Solver::root`]:
+//! - [`RootMode::Float`] (the paper): the reach-tree root is placed by
+//!   translating the whole body, and the linkage from the body root to it is
+//!   not changed. Put a goal on the body root to make it part of the solution.
+//! - [`RootMode::Fixed`] (a puppet on a stand): the body root never moves; the
+//!   chain from the body root to the reach-tree root is solved instead.
+
+mod balance;
+mod ccd;
+mod dls;
+mod greedy;
+mod reach;
+
+pub use dls::MAX_ROWS;
+pub use reach::ReachTree;
+
+use crate::body::{Angles, Body, BodyError};
+use crate::goal::{Frame, Goal, GoalSet, Residual};
+use crate::pose::{LocalPose, MAX_SEGMENTS, Pose};
+use glam::Vec3;
+
+/// Which algorithm positions the body.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// Reach-tree balancing (Fig. 17) with the paper's greedy triangle chain solver.
+    Greedy,
+    /// Reach-tree balancing with cyclic coordinate descent per DOF as chain solver.
+    Ccd,
+    /// Reach-tree balancing with damped least squares as chain solver.
+    Dls,
+    /// Weighted damped least squares over the whole reach tree.
+    TreeDls,
+}
+
+/// What may move the reach tree's root.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RootMode {
+    /// The paper: translate the whole body to place the reach-tree root.
+    Float,
+    /// The body root stays put; its chain to the reach-tree root is solved.
+    Fixed,
+}
+
+/// Solver configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Solver {
+    /// The algorithm.
+    pub method: Method,
+    /// What moves the reach-tree root.
+    pub root: RootMode,
+    /// Iteration cap: per reach-tree node for the balancing methods, in total
+    /// for [`Method::TreeDls`].
+    pub max_iterations: u16,
+    /// Passes (greedy, CCD) or iterations (DLS) per simple-chain solve.
+    pub chain_iterations: u16,
+    /// A goal within this distance (m; rad for orientations) counts as met, and
+    /// a weighted displacement below it counts as zero.
+    pub tolerance: f32,
+    /// Initial Levenberg–Marquardt damping: a factor of each variable's
+    /// curvature (for the chain DLS, a fixed factor).
+    pub damping: f32,
+    /// [`Method::TreeDls`]: after an accepted step, try the same step again
+    /// (one more forward kinematics per iteration; fewer iterations when goals
+    /// conflict).
+    pub extrapolate: bool,
+}
+
+impl Solver {
+    /// The paper's algorithm, for comparisons.
+    pub const PAPER: Solver = Solver {
+        method: Method::Greedy,
+        root: RootMode::Float,
+        max_iterations: 20,
+        chain_iterations: 1,
+        tolerance: 1e-5,
+        damping: 0.1,
+        extrapolate: true,
+    };
+
+    /// The default: whole-tree damped least squares, root fixed.
+    pub const DEFAULT: Solver = Solver {
+        method: Method::TreeDls,
+        root: RootMode::Fixed,
+        max_iterations: 20,
+        chain_iterations: 6,
+        tolerance: 1e-5,
+        damping: 0.1,
+        extrapolate: true,
+    };
+
+    /// The same configuration with another method.
+    #[must_use]
+    pub const fn with_method(mut self, method: Method) -> Self {
+        self.method = method;
+        self
+    }
+
+    /// The same configuration with another root mode.
+    #[must_use]
+    pub const fn with_root(mut self, root: RootMode) -> Self {
+        self.root = root;
+        self
+    }
+
+    /// The same configuration with another iteration cap.
+    #[must_use]
+    pub const fn with_iterations(mut self, max_iterations: u16) -> Self {
+        self.max_iterations = max_iterations;
+        self
+    }
+}
+
+impl Default for Solver {
+    fn default() -> Self {
+        Solver::DEFAULT
+    }
+}
+
+/// Why a solve was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SolveError {
+    /// The body is malformed or does not match the joint state.
+    Body(BodyError),
+    /// The body has more segments than the state's capacity.
+    Capacity,
+    /// Goal `i` names a segment that does not exist, or has a NaN weight.
+    BadGoal(u8),
+    /// The active goals need more least-squares rows than [`MAX_ROWS`].
+    TooManyRows,
+}
+
+impl From<BodyError> for SolveError {
+    fn from(e: BodyError) -> Self {
+        SolveError::Body(e)
+    }
+}
+
+/// The outcome of a solve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Report<const G: usize> {
+    /// Balancing iterations (chain solves or root moves) or DLS iterations.
+    pub iterations: u32,
+    /// Stopped on zero displacement or no further improvement, not on a cap.
+    pub converged: bool,
+    /// Each goal's residual in goal-set order: metres for point and plane
+    /// goals, radians for orientation goals (inactive goals too).
+    pub residuals: [f32; G],
+    /// The weighted error `Σ weight · residual²` over the active goals.
+    pub error: f32,
+}
+
+/// Positions the body: moves `angles` (the warm start) to meet `goals` as well as
+/// possible by their weights, and leaves the world pose of the result in `pose`.
+pub fn solve<const N: usize, const G: usize>(
+    solver: &Solver,
+    body: &Body<'_>,
+    goals: &GoalSet<G>,
+    angles: &mut Angles<N>,
+    pose: &mut Pose<N>,
+) -> Result<Report<G>, SolveError> {
+    let mut work = Work::new(body, goals.as_slice(), angles, pose)?;
+    let tree = ReachTree::<N>::build(body, goals.as_slice())?;
+    let (iterations, converged) = if tree.is_empty() {
+        (0, true)
+    } else {
+        match solver.method {
+            Method::TreeDls => dls::solve_tree(solver, &tree, &mut work)?,
+            Method::Greedy | Method::Ccd | Method::Dls => balance::solve(solver, &tree, &mut work)?,
+        }
+    };
+    let mut report = Report { iterations, converged, residuals: [0.0; G], error: 0.0 };
+    for ((r, g), i) in report.residuals.iter_mut().zip(goals.as_slice()).zip(0u8..) {
+        *r = g.evaluate(body, work.pose).ok_or(SolveError::BadGoal(i))?.magnitude();
+        if g.is_active() {
+            report.error += g.weight * *r * *r;
+        }
+    }
+    Ok(report)
+}
+
+/// The weighted error `Σ weight · residual²` of the active goals at `angles`
+/// (world pose left in `pose`).
+pub fn weighted_error<const N: usize>(
+    body: &Body<'_>,
+    goals: &[Goal],
+    angles: &Angles<N>,
+    pose: &mut Pose<N>,
+) -> Result<f32, SolveError> {
+    let mut local = LocalPose::<N>::default();
+    angles.forward(body, &mut local, pose)?;
+    let mut e = 0.0;
+    for (g, i) in goals.iter().zip(0u8..).filter(|(g, _)| g.is_active()) {
+        let r = g.evaluate(body, pose).ok_or(SolveError::BadGoal(i))?;
+        e += g.weight * squared(&r);
+    }
+    Ok(e)
+}
+
+/// The squared size of a residual.
+#[inline]
+fn squared(r: &Residual) -> f32 {
+    match *r {
+        Residual::Position(d) | Residual::Orientation(d) => d.length_squared(),
+        Residual::Plane { correction, .. } => correction * correction,
+    }
+}
+
+/// The mutable state of one solve: the joint state, its world pose, scratch.
+pub(crate) struct Work<'w, 'b, const N: usize> {
+    pub body: &'w Body<'b>,
+    pub goals: &'w [Goal],
+    pub angles: &'w mut Angles<N>,
+    pub pose: &'w mut Pose<N>,
+    local: LocalPose<N>,
+}
+
+impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
+    fn new(body: &'w Body<'b>, goals: &'w [Goal], angles: &'w mut Angles<N>, pose: &'w mut Pose<N>) -> Result<Self, SolveError> {
+        body.validate()?;
+        if body.len() > N || body.len() > MAX_SEGMENTS {
+            return Err(SolveError::Capacity);
+        }
+        if angles.count != body.len() {
+            return Err(SolveError::Body(BodyError::CountMismatch));
+        }
+        for (g, i) in goals.iter().zip(0u8..) {
+            let frame_ok = match g.frame {
+                Frame::World => true,
+                Frame::Segment(s) => usize::from(s) < body.len(),
+            };
+            if usize::from(g.segment) >= body.len() || !frame_ok || g.weight.is_nan() {
+                return Err(SolveError::BadGoal(i));
+            }
+        }
+        angles.clamp_to_limits(body);
+        let mut w = Work { body, goals, angles, pose, local: LocalPose::default() };
+        w.forward()?;
+        Ok(w)
+    }
+
+    /// Recomputes the world pose from the angles (the one forward kinematics).
+    pub fn forward(&mut self) -> Result<(), SolveError> {
+        self.angles.forward(self.body, &mut self.local, self.pose)?;
+        Ok(())
+    }
+
+    /// World position of a segment's touch point.
+    pub fn touch(&self, segment: usize) -> Vec3 {
+        let (Some(&p), Some(&r), Some(s)) =
+            (self.pose.positions.get(segment), self.pose.rotations.get(segment), self.body.segment(segment))
+        else {
+            return Vec3::ZERO;
+        };
+        p + r * s.touch
+    }
+}
+
+/// Segments from `top` (exclusive) down to `bottom` (inclusive), proximal first.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Chain<const N: usize> {
+    len: usize,
+    segments: [u8; N],
+}
+
+impl<const N: usize> Chain<N> {
+    /// The chain from `top` (exclusive; `None` = the body root) to `bottom`;
+    /// `skip_bottom` leaves the bottom joint out (it is reserved for an
+    /// orientation goal). The body root's joint is never part of a chain.
+    pub fn between(body: &Body<'_>, top: Option<usize>, bottom: usize, skip_bottom: bool) -> Self {
+        let mut up = [0u8; N];
+        let mut len = 0;
+        let mut s = Some(bottom);
+        while let Some(seg) = s {
+            if Some(seg) == top || seg == 0 || len >= N {
+                break;
+            }
+            if !(skip_bottom && seg == bottom)
+                && let Some(slot) = up.get_mut(len)
+            {
+                *slot = u8::try_from(seg).unwrap_or(u8::MAX);
+                len += 1;
+            }
+            s = body.parent(seg);
+        }
+        let mut segments = [0u8; N];
+        for (d, &u) in segments.iter_mut().zip(up.iter().take(len).rev()) {
+            *d = u;
+        }
+        Chain { len, segments }
+    }
+
+    /// The segments, proximal first.
+    pub fn segments(&self) -> impl DoubleEndedIterator<Item = usize> + '_ {
+        self.segments.iter().take(self.len).map(|&s| usize::from(s))
+    }
+
+    /// Number of segments.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+}
