@@ -99,7 +99,7 @@ pub fn build_firmware(bin: &str) -> Result<PathBuf, QemuError> {
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let status = Command::new(cargo)
             .current_dir(&dir)
-            .args(["build", "--release", "--bins", "--target-dir"])
+            .args(["build", "--quiet", "--release", "--bins", "--target-dir"])
             .arg(&target_dir)
             // Never inherit the outer build's flags or jobserver.
             .env_remove("RUSTFLAGS")
