@@ -96,15 +96,16 @@
 
 use glam::{Quat, Vec3};
 
-use crate::math::{self, SlerpWeight};
+use crate::math::{self, F4, Lane, SlerpWeight};
 use crate::pose::Pose;
 
 /// Most axes a grid may have.
 pub const MAX_AXES: usize = 6;
 /// Most samples in one interpolation window (a linear axis contributes a
-/// factor 2, a Catmull-Rom axis 4): six linear axes, or three Catmull-Rom
-/// axes and one linear, or one Catmull-Rom and five linear.
-pub const MAX_WINDOW: usize = 128;
+/// factor 2, a Catmull-Rom axis 4): up to six linear axes, one Catmull-Rom
+/// axis with four linear ones, two with two, or three Catmull-Rom axes. (Kept
+/// small: the query and the rotation scratch are sized by it.)
+pub const MAX_WINDOW: usize = 64;
 
 /// How an axis continues past its ends.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -339,9 +340,10 @@ impl Cubic {
         w
     }
 
-    /// Spherical Catmull-Rom of four rotations (exact endpoints).
+    /// Spherical Catmull-Rom of four rotations (exact endpoints), on
+    /// `[x, y, z, w]` components of any lane type (same bits per lane).
     #[inline]
-    fn rotation(&self, p: [Quat; 4]) -> Quat {
+    fn rotation<T: Lane>(&self, p: [[T; 4]; 4]) -> [T; 4] {
         let [p0, p1, p2, p3] = p;
         let s = self.s.t();
         if s <= 0.0 {
@@ -350,20 +352,21 @@ impl Cubic {
         if s >= 1.0 {
             return p2;
         }
-        let a2 = self.s.apply(p1, p2);
+        let a2 = self.s.apply_lanes(p1, p2);
         let a1 = if self.lo_phantom {
             a2
         } else {
-            self.s.apply(p1, math::reflect(p0, p1))
+            self.s.apply_lanes(p1, math::reflect_lanes(p0, p1))
         };
         let a3 = if self.hi_phantom {
             a2
         } else {
-            self.one_minus_s.apply(p2, math::reflect(p3, p2))
+            self.one_minus_s
+                .apply_lanes(p2, math::reflect_lanes(p3, p2))
         };
-        let b1 = self.half_s_plus.apply(a1, a2);
-        let b2 = self.half_s.apply(a2, a3);
-        self.s.apply(b1, b2)
+        let b1 = self.half_s_plus.apply_lanes(a1, a2);
+        let b2 = self.half_s.apply_lanes(a2, a3);
+        self.s.apply_lanes(b1, b2)
     }
 }
 
@@ -474,6 +477,14 @@ impl<'a> Grid<'a> {
     /// Locates `params` (one per axis) and computes the interpolation
     /// coefficients (see the module doc for the clamping/projection policy).
     pub fn query(&self, params: &[f32]) -> Result<Query, GridError> {
+        let mut q = Query::default();
+        self.query_into(params, &mut q)?;
+        Ok(q)
+    }
+
+    /// [`Grid::query`] into an existing [`Query`] (no copy of the large
+    /// query struct; reuse one across frames on the firmware).
+    pub fn query_into(&self, params: &[f32], q: &mut Query) -> Result<(), GridError> {
         if params.len() != self.axis_count {
             return Err(GridError::ParamCount);
         }
@@ -501,7 +512,8 @@ impl<'a> Grid<'a> {
                 adjust = Adjust::Projected;
             }
         }
-        Ok(self.build_query(&loc, adjust))
+        self.build_query(&loc, adjust, q);
+        Ok(())
     }
 
     /// Convenience: [`Grid::query`] then [`Query::pose`]; returns the adjustment.
@@ -511,7 +523,8 @@ impl<'a> Grid<'a> {
         params: &[f32],
         out: &mut Pose<N>,
     ) -> Result<Adjust, GridError> {
-        let q = self.query(params)?;
+        let mut q = Query::default();
+        self.query_into(params, &mut q)?;
         q.pose(samples, out)?;
         Ok(q.adjust())
     }
@@ -558,19 +571,12 @@ impl<'a> Grid<'a> {
         Ok((loc, d2))
     }
 
-    fn build_query(&self, loc: &[Located; MAX_AXES], adjust: Adjust) -> Query {
-        let mut q = Query {
-            window: [0; MAX_WINDOW],
-            weights: [0.0; MAX_WINDOW],
-            len: 1,
-            axes: [AxisWeights::Linear(SlerpWeight::new(0.0)); MAX_AXES],
-            axis_count: self.axis_count,
-            params: [0.0; MAX_AXES],
-            adjust,
-        };
-        if let Some(w) = q.weights.first_mut() {
-            *w = 1.0;
-        }
+    fn build_query(&self, loc: &[Located; MAX_AXES], adjust: Adjust, q: &mut Query) {
+        q.len = 1;
+        q.window[0] = 0;
+        q.weights[0] = 1.0;
+        q.axis_count = self.axis_count;
+        q.adjust = adjust;
         for (a, (((axis, l), aw), param)) in self
             .axes()
             .iter()
@@ -592,7 +598,6 @@ impl<'a> Grid<'a> {
                 stride,
             );
         }
-        q
     }
 
     /// Sample indices along axis `a` (window order), position weights and
@@ -769,24 +774,36 @@ fn expand(
     let old = *len;
     let new = old.saturating_mul(idx.len()).min(MAX_WINDOW);
     // Fill from the back so the old entries are read before being overwritten.
-    for j in (0..new).rev() {
-        let (Some(digit), Some(base)) = (j.checked_div(old), j.checked_rem(old)) else {
-            continue;
-        };
-        let (bi, bw) = (
-            window.get(base).copied().unwrap_or(0),
-            weights.get(base).copied().unwrap_or(0.0),
-        );
-        let (ai, aw) = (
-            idx.get(digit).copied().unwrap_or(0),
-            w.get(digit).copied().unwrap_or(0.0),
-        );
-        if let (Some(wi), Some(ww)) = (window.get_mut(j), weights.get_mut(j)) {
-            *wi = bi.wrapping_add(ai.wrapping_mul(stride));
-            *ww = bw * aw;
+    for (digit, (&ai, &aw)) in idx.iter().zip(w).enumerate().rev() {
+        for base in (0..old).rev() {
+            let j = digit * old + base;
+            let (bi, bw) = (
+                window.get(base).copied().unwrap_or(0),
+                weights.get(base).copied().unwrap_or(0.0),
+            );
+            if let (Some(wi), Some(ww)) = (window.get_mut(j), weights.get_mut(j)) {
+                *wi = bi.wrapping_add(ai.wrapping_mul(stride));
+                *ww = bw * aw;
+            }
         }
     }
     *len = new;
+}
+
+impl Default for Query {
+    /// An empty query (window of one sample 0, no axes); fill it with
+    /// [`Grid::query_into`].
+    fn default() -> Self {
+        Query {
+            window: [0; MAX_WINDOW],
+            weights: [0.0; MAX_WINDOW],
+            len: 0,
+            axes: [AxisWeights::Linear(SlerpWeight::START); MAX_AXES],
+            axis_count: 0,
+            params: [0.0; MAX_AXES],
+            adjust: Adjust::None,
+        }
+    }
 }
 
 impl Query {
@@ -818,9 +835,10 @@ impl Query {
     /// to the source's segment count).
     ///
     /// Segments are processed in blocks (as many as fit `MAX_WINDOW` window
-    /// entries, 16 for a trilinear window) level by level, so the slerps of
-    /// different segments are independent and pipeline well; the arithmetic
-    /// per segment is exactly that of [`Query::segment`].
+    /// entries, 8 for a trilinear window) level by level, with the rotation
+    /// components stored per component; on targets with SIMD the slerps of
+    /// four segments run as [`math::F4`] lanes. The arithmetic per segment is
+    /// exactly that of [`Query::segment`] (same bits).
     pub fn pose<S: Samples, const N: usize>(
         &self,
         samples: &S,
@@ -832,7 +850,7 @@ impl Query {
         }
         out.count = n;
         let block = MAX_WINDOW.checked_div(self.len).unwrap_or(1).max(1);
-        let mut buf = [Quat::IDENTITY; MAX_WINDOW];
+        let mut buf = Soa::new();
         let mut first = 0;
         while first < n {
             let count = block.min(n - first);
@@ -846,8 +864,9 @@ impl Query {
                 .rotations
                 .get_mut(first..first + count)
                 .unwrap_or(&mut []);
-            for (r, q) in rotations.iter_mut().zip(buf.iter()) {
-                *r = *q;
+            let [cx, cy, cz, cw] = &buf.0;
+            for ((((r, &x), &y), &z), &w) in rotations.iter_mut().zip(cx).zip(cy).zip(cz).zip(cw) {
+                *r = Quat::from_xyzw(x, y, z, w);
             }
             first += count;
         }
@@ -860,15 +879,17 @@ impl Query {
         samples: &S,
         segment: usize,
     ) -> Result<(Vec3, Quat), GridError> {
-        let mut buf = [Quat::IDENTITY; MAX_WINDOW];
+        let mut buf = Soa::new();
         let mut pos = [Vec3::ZERO];
         self.fetch(samples, segment, 1, &mut pos, &mut buf)?;
         self.reduce(&mut buf, 1, 1);
-        Ok((pos[0], buf[0]))
+        Ok((pos[0], buf.get(0)))
     }
 
     /// Reads the window of segments `first..first + positions.len()`:
-    /// positions as the weighted sum, rotations into `buf[j·block + b]`.
+    /// positions as the weighted sum (in window order), rotations into slot
+    /// `j·block + b`. Window-major, so each window sample's segments are read
+    /// consecutively.
     #[inline]
     fn fetch<S: Samples>(
         &self,
@@ -876,28 +897,37 @@ impl Query {
         first: usize,
         block: usize,
         positions: &mut [Vec3],
-        buf: &mut [Quat; MAX_WINDOW],
+        buf: &mut Soa,
     ) -> Result<(), GridError> {
-        for (b, pos) in positions.iter_mut().enumerate() {
-            let mut acc = Vec3::ZERO;
-            for (j, (&index, &w)) in self.window().iter().zip(self.weights()).enumerate() {
+        let count = positions.len();
+        positions.fill(Vec3::ZERO);
+        for (j, (&index, &w)) in self.window().iter().zip(self.weights()).enumerate() {
+            let [cx, cy, cz, cw] = &mut buf.0;
+            let range = j * block..j * block + count;
+            let (Some(sx), Some(sy), Some(sz), Some(sw)) = (
+                cx.get_mut(range.clone()),
+                cy.get_mut(range.clone()),
+                cz.get_mut(range.clone()),
+                cw.get_mut(range),
+            ) else {
+                return Err(GridError::MissingSample);
+            };
+            let rows = positions.iter_mut().zip(sx).zip(sy).zip(sz).zip(sw);
+            for (b, ((((pos, x), y), z), qw)) in rows.enumerate() {
                 let (p, q) = samples
                     .sample(index as usize, first + b)
                     .ok_or(GridError::MissingSample)?;
-                acc += p * w;
-                if let Some(slot) = buf.get_mut(j * block + b) {
-                    *slot = q;
-                }
+                *pos += p * w;
+                (*x, *y, *z, *qw) = (q.x, q.y, q.z, q.w);
             }
-            *pos = acc;
         }
         Ok(())
     }
 
     /// Runs the rotation tree on `count` segments laid out `[window][block]`;
-    /// the results end up in `buf[0..count]`.
+    /// the results end up in slots `0..count`.
     #[inline]
-    fn reduce(&self, buf: &mut [Quat; MAX_WINDOW], block: usize, count: usize) {
+    fn reduce(&self, buf: &mut Soa, block: usize, count: usize) {
         let mut len = self.len;
         for axis in self.axes.iter().take(self.axis_count) {
             len = match axis {
@@ -908,25 +938,86 @@ impl Query {
     }
 }
 
+/// Rotation scratch, one array per quaternion component (`[x, y, z, w]`).
+struct Soa([[f32; MAX_WINDOW]; 4]);
+
+impl Soa {
+    fn new() -> Self {
+        Soa([
+            [0.0; MAX_WINDOW],
+            [0.0; MAX_WINDOW],
+            [0.0; MAX_WINDOW],
+            [1.0; MAX_WINDOW],
+        ])
+    }
+
+    #[inline]
+    fn get(&self, i: usize) -> Quat {
+        let [x, y, z, w] = &self.0;
+        let at = |c: &[f32; MAX_WINDOW]| c.get(i).copied().unwrap_or(0.0);
+        Quat::from_xyzw(at(x), at(y), at(z), at(w))
+    }
+
+    #[inline]
+    fn set(&mut self, i: usize, q: Quat) {
+        for (c, v) in self.0.iter_mut().zip([q.x, q.y, q.z, q.w]) {
+            if let Some(slot) = c.get_mut(i) {
+                *slot = v;
+            }
+        }
+    }
+
+    /// Four consecutive slots starting at `i`, as lanes.
+    #[inline]
+    fn get4(&self, i: usize) -> Option<[F4; 4]> {
+        let [x, y, z, w] = &self.0;
+        let lanes = |c: &[f32; MAX_WINDOW]| {
+            c.get(i..)
+                .and_then(|s| s.first_chunk::<4>())
+                .map(|a| F4(*a))
+        };
+        Some([lanes(x)?, lanes(y)?, lanes(z)?, lanes(w)?])
+    }
+
+    #[inline]
+    fn set4(&mut self, i: usize, v: [F4; 4]) {
+        for (c, lane) in self.0.iter_mut().zip(v) {
+            if let Some(dst) = c.get_mut(i..).and_then(|s| s.first_chunk_mut::<4>()) {
+                *dst = lane.0;
+            }
+        }
+    }
+}
+
+/// Four lanes of slerp per step where the target has SIMD; on the Cortex-M
+/// (no SIMD FPU) the scalar path avoids the register pressure of four lanes.
+const WIDE: bool = !cfg!(target_arch = "arm");
+
 /// Slerps adjacent pairs in place: `g[i] = slerp(g[2i], g[2i+1])` for each
 /// window group `g` (stride `block`) and each of the `count` segments.
 #[inline]
-fn reduce_linear(
-    buf: &mut [Quat; MAX_WINDOW],
-    len: usize,
-    block: usize,
-    count: usize,
-    w: &SlerpWeight,
-) -> usize {
+fn reduce_linear(buf: &mut Soa, len: usize, block: usize, count: usize, w: &SlerpWeight) -> usize {
     let half = len / 2;
     for i in 0..half {
-        for b in 0..count {
-            let (ia, ib) = (2 * i * block + b, (2 * i + 1) * block + b);
-            if let (Some(&a), Some(&c)) = (buf.get(ia), buf.get(ib))
-                && let Some(slot) = buf.get_mut(i * block + b)
-            {
-                *slot = w.apply(a, c);
+        let (ia, ib, io) = (2 * i * block, (2 * i + 1) * block, i * block);
+        let mut b = 0;
+        // Whole lanes of four; the last group may run past `count` into
+        // unused slots of the block (their results are never read).
+        let wide_end = if WIDE && block.is_multiple_of(4) {
+            count.div_ceil(4) * 4
+        } else {
+            0
+        };
+        while b < wide_end {
+            if let (Some(qa), Some(qb)) = (buf.get4(ia + b), buf.get4(ib + b)) {
+                buf.set4(io + b, w.apply_lanes(qa, qb));
             }
+            b += 4;
+        }
+        while b < count {
+            let q = w.apply(buf.get(ia + b), buf.get(ib + b));
+            buf.set(io + b, q);
+            b += 1;
         }
     }
     half
@@ -934,25 +1025,35 @@ fn reduce_linear(
 
 /// Spherical Catmull-Rom over groups of four, in place (layout as above).
 #[inline]
-fn reduce_cubic(
-    buf: &mut [Quat; MAX_WINDOW],
-    len: usize,
-    block: usize,
-    count: usize,
-    c: &Cubic,
-) -> usize {
+fn reduce_cubic(buf: &mut Soa, len: usize, block: usize, count: usize, c: &Cubic) -> usize {
     let quarter = len / 4;
+    let wide_end = if WIDE && block.is_multiple_of(4) {
+        count.div_ceil(4) * 4
+    } else {
+        0
+    };
     for i in 0..quarter {
-        for b in 0..count {
-            let at = |k: usize| {
-                buf.get((4 * i + k) * block + b)
-                    .copied()
-                    .unwrap_or(Quat::IDENTITY)
-            };
-            let group = [at(0), at(1), at(2), at(3)];
-            if let Some(slot) = buf.get_mut(i * block + b) {
-                *slot = c.rotation(group);
+        let slot = |k: usize, b: usize| (4 * i + k) * block + b;
+        let mut b = 0;
+        while b < wide_end {
+            if let (Some(q0), Some(q1), Some(q2), Some(q3)) = (
+                buf.get4(slot(0, b)),
+                buf.get4(slot(1, b)),
+                buf.get4(slot(2, b)),
+                buf.get4(slot(3, b)),
+            ) {
+                buf.set4(i * block + b, c.rotation([q0, q1, q2, q3]));
             }
+            b += 4;
+        }
+        while b < count {
+            let at = |k: usize| {
+                let q = buf.get(slot(k, b));
+                [q.x, q.y, q.z, q.w]
+            };
+            let [x, y, z, w] = c.rotation([at(0), at(1), at(2), at(3)]);
+            buf.set(i * block + b, Quat::from_xyzw(x, y, z, w));
+            b += 1;
         }
     }
     quarter

@@ -551,9 +551,91 @@ fn weight_poly(s: f32) -> [f32; 6] {
 /// Evaluates a degree-5 polynomial in `x` given `x²`, `x⁴` (Estrin's scheme:
 /// the same operation count as Horner with a third of its latency).
 #[inline]
-fn poly5(c: &[f32; 6], x: f32, x2: f32, x4: f32) -> f32 {
+fn poly5<T: Lane>(c: &[f32; 6], x: T, x2: T, x4: T) -> T {
     let [c0, c1, c2, c3, c4, c5] = *c;
+    let (c0, c1, c2, c3, c4, c5) = (
+        T::splat(c0),
+        T::splat(c1),
+        T::splat(c2),
+        T::splat(c3),
+        T::splat(c4),
+        T::splat(c5),
+    );
     ((c0 + c1 * x) + x2 * (c2 + c3 * x)) + x4 * (c4 + c5 * x)
+}
+
+/// A number type the slerp kernel runs on: `f32`, or [`F4`] (four
+/// independent `f32` lanes). Every lane performs exactly the `f32` operation
+/// sequence, so both give the same bits.
+pub trait Lane:
+    Copy + core::ops::Add<Output = Self> + core::ops::Sub<Output = Self> + core::ops::Mul<Output = Self>
+{
+    /// All lanes `v`.
+    fn splat(v: f32) -> Self;
+    /// Lane-wise [`abs`].
+    #[must_use]
+    fn abs(self) -> Self;
+    /// Lane-wise [`copysign`]`(self, s)`.
+    #[must_use]
+    fn copysign(self, s: Self) -> Self;
+}
+
+impl Lane for f32 {
+    #[inline]
+    fn splat(v: f32) -> Self {
+        v
+    }
+    #[inline]
+    fn abs(self) -> Self {
+        abs(self)
+    }
+    #[inline]
+    fn copysign(self, s: Self) -> Self {
+        copysign(self, s)
+    }
+}
+
+/// Four `f32` lanes with lane-wise IEEE operations (the compiler maps them to
+/// SIMD where the target has it). Used to run four segments' slerps at once.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct F4(pub [f32; 4]);
+
+macro_rules! f4_op {
+    ($tr:ident, $f:ident, $op:tt) => {
+        impl core::ops::$tr for F4 {
+            type Output = F4;
+            #[inline]
+            fn $f(self, o: F4) -> F4 {
+                let ([a0, a1, a2, a3], [b0, b1, b2, b3]) = (self.0, o.0);
+                F4([a0 $op b0, a1 $op b1, a2 $op b2, a3 $op b3])
+            }
+        }
+    };
+}
+f4_op!(Add, add, +);
+f4_op!(Sub, sub, -);
+f4_op!(Mul, mul, *);
+
+impl Lane for F4 {
+    #[inline]
+    fn splat(v: f32) -> Self {
+        F4([v; 4])
+    }
+    #[inline]
+    fn abs(self) -> Self {
+        let [a0, a1, a2, a3] = self.0;
+        F4([abs(a0), abs(a1), abs(a2), abs(a3)])
+    }
+    #[inline]
+    fn copysign(self, s: Self) -> Self {
+        let ([a0, a1, a2, a3], [s0, s1, s2, s3]) = (self.0, s.0);
+        F4([
+            copysign(a0, s0),
+            copysign(a1, s1),
+            copysign(a2, s2),
+            copysign(a3, s3),
+        ])
+    }
 }
 
 /// Where a [`SlerpWeight`] sits: the endpoints return an input unchanged.
@@ -578,6 +660,14 @@ pub struct SlerpWeight {
 }
 
 impl SlerpWeight {
+    /// The weight `t = 0` (returns the first input).
+    pub const START: SlerpWeight = SlerpWeight {
+        t: 0.0,
+        w0: [0.0; 6],
+        w1: [0.0; 6],
+        mode: SlerpMode::Start,
+    };
+
     /// Precomputes the weight for `t` (clamped to `[0, 1]`).
     #[must_use]
     pub fn new(t: f32) -> Self {
@@ -589,6 +679,15 @@ impl SlerpWeight {
             SlerpMode::Mid
         };
         let t = t.clamp(0.0, 1.0);
+        if mode != SlerpMode::Mid {
+            // The endpoints return an input; no polynomial needed.
+            return Self {
+                t,
+                w0: [0.0; 6],
+                w1: [0.0; 6],
+                mode,
+            };
+        }
         Self {
             t,
             w0: weight_poly(1.0 - t),
@@ -617,21 +716,44 @@ impl SlerpWeight {
 
     #[inline]
     fn mid(&self, a: Quat, b: Quat) -> Quat {
+        let [x, y, z, w] = self.kernel([a.x, a.y, a.z, a.w], [b.x, b.y, b.z, b.w]);
+        Quat::from_xyzw(x, y, z, w)
+    }
+
+    /// Slerp on `[x, y, z, w]` components of any [`Lane`] type, e.g. four
+    /// quaternion pairs at once as [`F4`] lanes (bit-identical to [`apply`]
+    /// per lane, endpoints included).
+    ///
+    /// [`apply`]: SlerpWeight::apply
+    #[inline]
+    #[must_use]
+    pub fn apply_lanes<T: Lane>(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
+        match self.mode {
+            SlerpMode::Start => a,
+            SlerpMode::End => b,
+            SlerpMode::Mid => self.kernel(a, b),
+        }
+    }
+
+    #[inline]
+    fn kernel<T: Lane>(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
+        let [ax, ay, az, aw] = a;
+        let [bx, by, bz, bw] = b;
         // Pairwise sums: shorter dependency chains (the order is fixed, so the
         // bits are still the same on every target).
-        let d = (a.x * b.x + a.y * b.y) + (a.z * b.z + a.w * b.w);
-        let x = abs(d);
+        let d = (ax * bx + ay * by) + (az * bz + aw * bw);
+        let x = d.abs();
         let x2 = x * x;
         let x4 = x2 * x2;
         let w0 = poly5(&self.w0, x, x2, x4);
-        let w1 = copysign(poly5(&self.w1, x, x2, x4), d);
-        let rx = a.x * w0 + b.x * w1;
-        let ry = a.y * w0 + b.y * w1;
-        let rz = a.z * w0 + b.z * w1;
-        let rw = a.w * w0 + b.w * w1;
+        let w1 = poly5(&self.w1, x, x2, x4).copysign(d);
+        let rx = ax * w0 + bx * w1;
+        let ry = ay * w0 + by * w1;
+        let rz = az * w0 + bz * w1;
+        let rw = aw * w0 + bw * w1;
         // |r| is within 4e-6 of 1: one Newton step for 1/|r| from 1.
-        let s = 1.5 - 0.5 * ((rx * rx + ry * ry) + (rz * rz + rw * rw));
-        Quat::from_xyzw(rx * s, ry * s, rz * s, rw * s)
+        let s = T::splat(1.5) - T::splat(0.5) * ((rx * rx + ry * ry) + (rz * rz + rw * rw));
+        [rx * s, ry * s, rz * s, rw * s]
     }
 }
 
@@ -651,8 +773,19 @@ pub fn slerp(a: Quat, b: Quat, t: f32) -> Quat {
 #[inline]
 #[must_use]
 pub fn reflect(a: Quat, b: Quat) -> Quat {
-    let s = 2.0 * quat_dot(a, b);
-    Quat::from_xyzw(s * b.x - a.x, s * b.y - a.y, s * b.z - a.z, s * b.w - a.w)
+    let [x, y, z, w] = reflect_lanes([a.x, a.y, a.z, a.w], [b.x, b.y, b.z, b.w]);
+    Quat::from_xyzw(x, y, z, w)
+}
+
+/// [`reflect`] on `[x, y, z, w]` components of any [`Lane`] type (same bits
+/// per lane).
+#[inline]
+#[must_use]
+pub fn reflect_lanes<T: Lane>(a: [T; 4], b: [T; 4]) -> [T; 4] {
+    let [ax, ay, az, aw] = a;
+    let [bx, by, bz, bw] = b;
+    let s = T::splat(2.0) * (ax * bx + ay * by + az * bz + aw * bw);
+    [s * bx - ax, s * by - ay, s * bz - az, s * bw - aw]
 }
 
 /// Rotation by `angle` radians about `axis` (normalized here; a zero axis
