@@ -17,7 +17,8 @@
 //! is zero (below `tolerance · stweight`).
 //!
 //! Extensions: plane goals contribute their displacement (towards the nearest
-//! point of the plane); a node with an orientation goal reserves its own joint
+//! point of the plane); a goal in another segment's frame also pulls that
+//! segment, the opposite way; a node with an orientation goal reserves its own joint
 //! for it (set by projecting the target orientation onto the joint's DOFs) and
 //! its chain stops one joint higher.
 
@@ -89,12 +90,19 @@ impl<const N: usize> Balance<'_, '_, N> {
             stweight += w;
         }
         orient(work, seg)?;
-        for (g, i) in work.goals.iter().zip(0u8..) {
-            if usize::from(g.segment) == seg && g.is_active() && g.is_positional() {
-                let r = g.evaluate(work.body, work.pose).ok_or(SolveError::BadGoal(i))?;
-                stwd += r.displacement() * g.weight;
-                stweight += g.weight;
-            }
+        for (g, i) in work.goals.iter().zip(0u8..).filter(|(g, _)| g.is_active() && g.is_positional()) {
+            // A goal pulls its own segment towards the target and, if the target
+            // is in another segment's frame, that segment the opposite way.
+            let sign = if usize::from(g.segment) == seg {
+                1.0
+            } else if g.frame == Frame::Segment(u8::try_from(seg).unwrap_or(u8::MAX)) {
+                -1.0
+            } else {
+                continue;
+            };
+            let r = g.evaluate(work.body, work.pose).ok_or(SolveError::BadGoal(i))?;
+            stwd += r.displacement() * (sign * g.weight);
+            stweight += g.weight;
         }
         Ok((stwd, stweight))
     }

@@ -28,7 +28,7 @@
 
 use super::ccd::world_axes;
 use super::{Chain, ReachTree, RootMode, SolveError, Solver, Work};
-use crate::goal::{Frame, Goal, Residual};
+use crate::goal::{Frame, Goal, PlaneSide, Residual, Target};
 use crate::math;
 use crate::pose::MAX_SEGMENTS;
 use glam::Vec3;
@@ -194,8 +194,11 @@ struct Block {
     frame: Option<usize>,
     /// What the rows measure.
     kind: Kind,
-    /// √(w / w_max).
+    /// √(w / w_max); 0 while on standby.
     sw: f32,
+    /// A satisfied one-sided plane goal: (its distance above the plane, its
+    /// √(w / w_max)). It joins the step only if the step would cross the plane.
+    standby: Option<(f32, f32)>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -245,7 +248,7 @@ impl Rows {
                 .ok_or(SolveError::BadGoal(i))?;
             rows.worst = rows.worst.max(res.magnitude());
             let sw = math::sqrt(g.weight / wmax);
-            let Some((kind, values)) = block_of(work, g, &res) else {
+            let Some((kind, values, gap)) = block_of(work, g, &res) else {
                 continue;
             };
             let block = Block {
@@ -253,14 +256,15 @@ impl Rows {
                 seg: usize::from(g.segment),
                 frame: frame_of(g),
                 kind,
-                sw,
+                sw: if gap.is_some() { 0.0 } else { sw },
+                standby: gap.map(|d| (d, sw)),
             };
             let n = block.rows();
             if rows.m + n > MAX_ROWS {
                 return Err(SolveError::TooManyRows);
             }
             for (dst, v) in rows.r.iter_mut().skip(rows.m).zip(values.iter().take(n)) {
-                *dst = v * sw;
+                *dst = v * block.sw;
                 rows.error += *dst * *dst;
             }
             if let Some(slot) = rows.blocks.get_mut(rows.count) {
@@ -284,37 +288,23 @@ fn frame_of(g: &Goal) -> Option<usize> {
     }
 }
 
-/// The row kind and unscaled residual values of an active goal (`None` for a
-/// satisfied one-sided plane goal, which has no row).
-fn block_of<const N: usize>(
-    work: &Work<'_, '_, N>,
-    g: &Goal,
-    res: &Residual,
-) -> Option<(Kind, [f32; 3])> {
+/// The row kind and unscaled residual values of an active goal, and for a
+/// satisfied one-sided plane goal its distance above the plane (standby).
+fn block_of<const N: usize>(work: &Work<'_, '_, N>, g: &Goal, res: &Residual) -> Option<(Kind, [f32; 3], Option<f32>)> {
     let x = g.world_point(work.body, work.pose)?;
-    let origin = frame_of(g)
-        .and_then(|f| work.pose.positions.get(f).copied())
-        .unwrap_or(Vec3::ZERO);
+    let origin = frame_of(g).and_then(|f| work.pose.positions.get(f).copied()).unwrap_or(Vec3::ZERO);
     match *res {
-        Residual::Position(d) => Some((Kind::Point { x, g: x + d }, [d.x, d.y, d.z])),
+        Residual::Position(d) => Some((Kind::Point { x, g: x + d }, [d.x, d.y, d.z], None)),
         Residual::Plane { normal, correction } => {
-            let contact = matches!(
-                g.target,
-                crate::goal::Target::Plane {
-                    side: crate::goal::PlaneSide::Contact,
-                    ..
+            let gap = match g.target {
+                Target::Plane { offset, side: PlaneSide::Above, .. } if correction == 0.0 => {
+                    Some(normal.dot(x) - offset - normal.dot(origin))
                 }
-            );
-            (contact || correction != 0.0).then_some((
-                Kind::Plane {
-                    x,
-                    n: normal,
-                    o: origin,
-                },
-                [correction, 0.0, 0.0],
-            ))
+                _ => None,
+            };
+            Some((Kind::Plane { x, n: normal, o: origin }, [correction, 0.0, 0.0], gap))
         }
-        Residual::Orientation(w) => Some((Kind::Orientation, [w.x, w.y, w.z])),
+        Residual::Orientation(w) => Some((Kind::Orientation, [w.x, w.y, w.z], None)),
     }
 }
 
@@ -325,51 +315,51 @@ struct Var {
     dof: u8,
 }
 
-/// Writes the column of one variable into `col` (only the rows it touches, listed
-/// in `nz`); returns how many rows that is.
-#[allow(clippy::too_many_arguments)]
-fn column(
-    rows: &Rows,
-    anc: &[u64],
-    var: Var,
-    w: Vec3,
-    p: Vec3,
-    col: &mut [f32; MAX_ROWS],
-    nz: &mut [u8; MAX_ROWS],
-) -> usize {
-    let mut k = 0;
+/// Whether a variable moves a block's point (`a`) and its frame (`b`).
+fn dependence(b: &Block, anc: &[u64], var: Var) -> (bool, bool) {
+    if var.seg == TRANSLATION {
+        return (true, b.frame.is_some());
+    }
     let bit = 1u64.checked_shl(u32::from(var.seg)).unwrap_or(0);
     let dep = |s: usize| anc.get(s).is_some_and(|m| m & bit != 0);
-    for b in rows.iter() {
-        let (da, db) = if var.seg == TRANSLATION {
-            (true, b.frame.is_some())
-        } else {
-            (dep(b.seg), b.frame.is_some_and(dep))
-        };
-        if !da && !db {
+    (dep(b.seg), b.frame.is_some_and(dep))
+}
+
+/// The unscaled derivative of a block's rows with respect to one variable with
+/// world axis `w` and pivot `p` (for a translation, `w` is its direction).
+fn block_column(b: &Block, (da, db): (bool, bool), var: Var, w: Vec3, p: Vec3) -> [f32; 3] {
+    match (b.kind, var.seg == TRANSLATION) {
+        (Kind::Point { .. }, true) => [w.x, w.y, w.z].map(|c| if db { 0.0 } else { c }),
+        (Kind::Point { x, g }, false) => {
+            let j = if da { w.cross(x - p) } else { Vec3::ZERO } - if db { w.cross(g - p) } else { Vec3::ZERO };
+            [j.x, j.y, j.z]
+        }
+        (Kind::Plane { n, .. }, true) => [if db { 0.0 } else { n.dot(w) }, 0.0, 0.0],
+        (Kind::Plane { x, n, o }, false) => {
+            let mut j = if da { n.dot(w.cross(x - p)) } else { 0.0 };
+            if db {
+                j += w.cross(n).dot(x - o) - n.dot(w.cross(o - p));
+            }
+            [j, 0.0, 0.0]
+        }
+        (Kind::Orientation, true) => [0.0; 3],
+        (Kind::Orientation, false) => {
+            let j = if da { w } else { Vec3::ZERO } - if db { w } else { Vec3::ZERO };
+            [j.x, j.y, j.z]
+        }
+    }
+}
+
+/// Writes the (scaled) column of one variable into `col`, only the rows it
+/// touches, listed in `nz`; returns how many rows that is.
+fn column(rows: &Rows, anc: &[u64], var: Var, w: Vec3, p: Vec3, col: &mut [f32; MAX_ROWS], nz: &mut [u8; MAX_ROWS]) -> usize {
+    let mut k = 0;
+    for b in rows.iter().filter(|b| b.sw != 0.0) {
+        let dep = dependence(b, anc, var);
+        if dep == (false, false) {
             continue;
         }
-        let vals: [f32; 3] = match (b.kind, var.seg == TRANSLATION) {
-            (Kind::Point { .. }, true) => [w.x, w.y, w.z].map(|c| if db { 0.0 } else { c }),
-            (Kind::Point { x, g }, false) => {
-                let j = if da { w.cross(x - p) } else { Vec3::ZERO }
-                    - if db { w.cross(g - p) } else { Vec3::ZERO };
-                [j.x, j.y, j.z]
-            }
-            (Kind::Plane { n, .. }, true) => [if db { 0.0 } else { n.dot(w) }, 0.0, 0.0],
-            (Kind::Plane { x, n, o }, false) => {
-                let mut j = if da { n.dot(w.cross(x - p)) } else { 0.0 };
-                if db {
-                    j += w.cross(n).dot(x - o) - n.dot(w.cross(o - p));
-                }
-                [j, 0.0, 0.0]
-            }
-            (Kind::Orientation, true) => [0.0; 3],
-            (Kind::Orientation, false) => {
-                let j = if da { w } else { Vec3::ZERO } - if db { w } else { Vec3::ZERO };
-                [j.x, j.y, j.z]
-            }
-        };
+        let vals = block_column(b, dep, var, w, p);
         for (i, &v) in vals.iter().enumerate().take(b.rows()) {
             let row = b.row + i;
             if let (Some(c), Some(z)) = (col.get_mut(row), nz.get_mut(k)) {
@@ -507,7 +497,7 @@ pub(super) fn solve_tree<const N: usize>(
         if fresh {
             axes(work, vars, &mut lin.geometry);
         }
-        if !step(work, &rows, &anc, vars, lambda * lambda, &mut lin) {
+        if !step(work, &mut rows, &anc, vars, lambda * lambda, &mut lin) {
             lambda *= 4.0;
             fresh = false;
             continue;
@@ -579,7 +569,7 @@ struct Linearization {
 /// motion is taken out of the residual, and the rest is solved again.
 fn step<const N: usize>(
     work: &Work<'_, '_, N>,
-    rows: &Rows,
+    rows: &mut Rows,
     anc: &[u64],
     vars: &[Var],
     lambda2: f32,
@@ -626,11 +616,41 @@ fn step<const N: usize>(
                 }
             }
         }
+        if pass + 1 < CLAMP_PASSES && wake(rows, anc, vars, lin, &mut r) {
+            clamped = true;
+        }
         if !clamped {
             break;
         }
     }
     true
+}
+
+/// Activates every standby plane row that the step `lin.delta` would carry
+/// through its plane (its residual becomes the distance to the plane);
+/// returns whether any did.
+fn wake(rows: &mut Rows, anc: &[u64], vars: &[Var], lin: &Linearization, r: &mut [f32; MAX_ROWS]) -> bool {
+    let mut woke = false;
+    for b in rows.blocks.iter_mut().take(rows.count).flatten() {
+        let Some((gap, sw)) = b.standby else { continue };
+        let ds: f32 = vars
+            .iter()
+            .zip(&lin.geometry)
+            .zip(&lin.delta)
+            .filter(|(_, d)| **d != 0.0)
+            .map(|((v, &(w, p)), d)| block_column(b, dependence(b, anc, *v), *v, w, p)[0] * d)
+            .sum();
+        if gap + ds < 0.0 {
+            b.standby = None;
+            b.sw = sw;
+            if let (Some(x), Some(y)) = (rows.r.get_mut(b.row), r.get_mut(b.row)) {
+                *x = -gap * sw;
+                *y = -gap * sw;
+            }
+            woke = true;
+        }
+    }
+    woke
 }
 
 #[inline]
@@ -692,22 +712,27 @@ fn normal_matrix<const N: usize>(
     }
 }
 
-/// The tension term `Σ √w̃·r̃ · (x − p)⊥ω` (clamped at 0) of a rotational variable.
+/// The tension term of a rotational variable, `Σ √w̃·r̃ · (x − p)⊥ω` over the
+/// goals it moves (for a goal in another segment's frame whose frame it moves,
+/// minus the same term at the target), clamped at 0.
 fn stiffness(rows: &Rows, anc: &[u64], var: Var, w: Vec3, p: Vec3) -> f32 {
     if var.seg == TRANSLATION {
         return 0.0;
     }
-    let bit = 1u64.checked_shl(u32::from(var.seg)).unwrap_or(0);
+    let perp = |v: Vec3| v - w * w.dot(v);
     let mut s = 0.0;
-    for b in rows.iter().filter(|b| b.frame.is_none() && anc.get(b.seg).is_some_and(|m| m & bit != 0)) {
+    for b in rows.iter().filter(|b| b.sw != 0.0) {
+        let (da, db) = dependence(b, anc, var);
         let r = |i: usize| rows.r.get(b.row + i).copied().unwrap_or(0.0);
-        let (x, rv) = match b.kind {
-            Kind::Point { x, .. } => (x, Vec3::new(r(0), r(1), r(2))),
-            Kind::Plane { x, n, .. } => (x, n * r(0)),
-            Kind::Orientation => continue,
+        let bend = match b.kind {
+            Kind::Point { x, g } => {
+                let arm = if da { perp(x - p) } else { Vec3::ZERO } - if db { perp(g - p) } else { Vec3::ZERO };
+                Vec3::new(r(0), r(1), r(2)).dot(arm)
+            }
+            Kind::Plane { x, n, .. } if da && !db => r(0) * n.dot(perp(x - p)),
+            Kind::Plane { .. } | Kind::Orientation => continue,
         };
-        let arm = x - p;
-        s += b.sw * rv.dot(arm - w * w.dot(arm));
+        s += b.sw * bend;
     }
     s.max(0.0)
 }

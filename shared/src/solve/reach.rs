@@ -9,7 +9,7 @@
 
 use super::SolveError;
 use crate::body::Body;
-use crate::goal::Goal;
+use crate::goal::{Frame, Goal};
 use crate::pose::{MAX_SEGMENTS, NO_PARENT};
 
 /// A reach tree: nodes in ascending segment order, so a node's reach parent
@@ -23,8 +23,9 @@ pub struct ReachTree<const N: usize = MAX_SEGMENTS> {
 }
 
 impl<const N: usize> ReachTree<N> {
-    /// Builds the reach tree of the active goals (a goal's frame segment does
-    /// not make a node). An empty goal set gives an empty tree.
+    /// Builds the reach tree of the active goals. A goal given in another
+    /// segment's frame makes both segments nodes: it pulls them towards each
+    /// other. An empty goal set gives an empty tree.
     pub fn build(body: &Body<'_>, goals: &[Goal]) -> Result<Self, SolveError> {
         let n = body.len();
         if n > N {
@@ -33,7 +34,13 @@ impl<const N: usize> ReachTree<N> {
         let mut has_goal = [false; N];
         for (i, g) in goals.iter().enumerate().filter(|(_, g)| g.is_active()) {
             let bad = SolveError::BadGoal(u8::try_from(i).unwrap_or(u8::MAX));
-            *has_goal.get_mut(usize::from(g.segment)).filter(|_| usize::from(g.segment) < n).ok_or(bad)? = true;
+            let frame = match g.frame {
+                Frame::World => None,
+                Frame::Segment(f) => Some(usize::from(f)),
+            };
+            for s in core::iter::once(usize::from(g.segment)).chain(frame) {
+                *has_goal.get_mut(s).filter(|_| s < n).ok_or(bad)? = true;
+            }
         }
         // Bottom-up: does a segment's subtree hold a goal, and how many of its
         // children's subtrees do?
