@@ -1034,3 +1034,232 @@ fn seam_blend_closes_the_loop_smoothly() {
         Err(ClipError::OutputLength)
     );
 }
+
+// ---------------------------------------------------------------- real data (HDM05)
+
+use marionette_host::import::{EndSites, amc};
+
+/// World poses of every frame of an HDM05 take (bk actor), via the host's
+/// ASF/AMC importer and the core's forward kinematics.
+fn hdm05(take: &str) -> (Vec<String>, Vec<u8>, Vec<Vec3>, Vec<Pose<64>>, f32) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/hdm05_bk");
+    let motion = amc::read_motion(
+        &dir.join("HDM_bk.asf"),
+        &dir.join(format!("HDM_bk_{take}_120.amc")),
+        1.0 / 120.0,
+    )
+    .expect("HDM05 take");
+    let skel = motion.core_skeleton(EndSites::Drop).expect("skeleton");
+    let poses = (0..motion.frames.len())
+        .map(|f| {
+            let local = motion.local_pose::<64>(&skel, f).expect("frame");
+            let mut world = Pose::<64>::default();
+            pose::forward(&skel.hierarchy(), &local, &mut world).expect("fk");
+            world
+        })
+        .collect();
+    (
+        skel.names.clone(),
+        skel.parents.clone(),
+        skel.offsets.clone(),
+        poses,
+        motion.frame_time as f32,
+    )
+}
+
+/// Flattens poses into `[sample][segment]` slices.
+fn flatten(poses: &[Pose<64>]) -> (Vec<Vec3>, Vec<Quat>) {
+    let p = poses.iter().flat_map(|x| x.positions().to_vec()).collect();
+    let q = poses.iter().flat_map(|x| x.rotations().to_vec()).collect();
+    (p, q)
+}
+
+/// Held-out error of a 1-D grid over time: every `stride`-th frame of a real
+/// take is a grid sample; the frames in between are synthesized and compared
+/// with the recorded ones (all segments). Linear and Catmull-Rom axes.
+#[test]
+fn hdm05_held_out_synthesis_error() {
+    for take in ["rotateArmsBothBackward1Reps_007", "grabHighR_005"] {
+        let (names, _, _, poses, _) = hdm05(take);
+        let segs = names.len();
+        let stride = 8usize;
+        let count = (poses.len() - 1) / stride + 1;
+        let kept: Vec<Pose<64>> = (0..count).map(|i| poses[i * stride]).collect();
+        let (p, q) = flatten(&kept);
+        let samples = SliceSamples::new(segs, &p, &q).unwrap();
+        for interp in [Interp::Linear, Interp::CatmullRom] {
+            let axis = Axis {
+                min: 0.0,
+                step: stride as f32,
+                count: count as u32,
+                kind: AxisKind::Bounded,
+                interp,
+            };
+            let grid = Grid::new(&[axis], None).unwrap();
+            let mut out = Pose::<64>::default();
+            let (mut sum_p, mut max_p, mut sum_q, mut max_q, mut n) =
+                (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0usize);
+            for (f, actual) in poses.iter().enumerate().take((count - 1) * stride + 1) {
+                grid.synthesize(&samples, &[f as f32], &mut out).unwrap();
+                if f % stride == 0 {
+                    assert_eq!(out.positions(), actual.positions(), "grid point {f}");
+                    continue;
+                }
+                for s in 0..segs {
+                    let ep = dist(v64(out.positions[s]), v64(actual.positions[s]));
+                    let eq = r::angle_between(q64(out.rotations[s]), q64(actual.rotations[s]));
+                    (sum_p, max_p, sum_q, max_q, n) =
+                        (sum_p + ep, max_p.max(ep), sum_q + eq, max_q.max(eq), n + 1);
+                }
+            }
+            let (mean_p, mean_q) = (sum_p / n as f64, sum_q / n as f64);
+            println!(
+                "HDM05 {take}, {segs} segments, every {stride}th frame kept (15 Hz), {interp:?}: held-out position error mean {:.2} mm max {:.1} mm; rotation mean {:.3}° max {:.2}°",
+                mean_p * 1e3,
+                max_p * 1e3,
+                mean_q.to_degrees(),
+                max_q.to_degrees()
+            );
+            // Loose sanity bounds (15 Hz keyframes of 120 Hz capture).
+            assert!(mean_p < 5e-3 && max_p < 0.1, "{mean_p} {max_p}");
+            assert!(mean_q < 0.02 && max_q < 0.5, "{mean_q} {max_q}");
+        }
+    }
+}
+
+/// A real reach (grab from a high shelf) as a two-phase clip: split at the
+/// highest right-hand frame, each phase resampled to 17 frames; two takes
+/// form a one-parameter clip grid. Coefficients 0/1 give each take back at
+/// its own timing, the reach pose sits exactly at the first phase's duration,
+/// and the held-out error of the resampled clip against the recording is
+/// reported.
+#[test]
+fn hdm05_reach_clips() {
+    let takes = ["grabHighR_005", "grabHighR_006"];
+    let frames_per_phase = 17usize;
+    let count = 2 * (frames_per_phase - 1) + 1;
+    let mut clip_p = vec![Vec3::ZERO; 0];
+    let mut clip_q = vec![Quat::IDENTITY; 0];
+    let mut durations = Vec::new();
+    let mut recordings = Vec::new();
+    let mut segs = 0;
+    // Frames of both clips, resampled: per take, [frame][segment].
+    let mut resampled: Vec<(Vec<Vec3>, Vec<Quat>)> = Vec::new();
+    for take in takes {
+        let (names, _, _, poses, dt) = hdm05(take);
+        segs = names.len();
+        let hand = names.iter().position(|n| n == "rhand").expect("rhand");
+        let reach = (0..poses.len())
+            .max_by(|&a, &b| {
+                poses[a].positions[hand]
+                    .y
+                    .total_cmp(&poses[b].positions[hand].y)
+            })
+            .unwrap();
+        let times: Vec<f32> = (0..poses.len()).map(|f| f as f32 * dt).collect();
+        let (p, q) = flatten(&poses);
+        let src = SliceSamples::new(segs, &p, &q).unwrap();
+        let (mut op, mut oq) = (Vec::new(), Vec::new());
+        for (k, span) in [
+            Span {
+                start: 0.0,
+                end: times[reach],
+            },
+            Span {
+                start: times[reach],
+                end: *times.last().unwrap(),
+            },
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let (mut pp, mut qq) = (
+                vec![Vec3::ZERO; frames_per_phase * segs],
+                vec![Quat::IDENTITY; frames_per_phase * segs],
+            );
+            clip::resample(
+                &src,
+                &times,
+                span,
+                false,
+                frames_per_phase,
+                &mut pp,
+                &mut qq,
+            )
+            .unwrap();
+            // The phases share the reach frame.
+            let skip = if k == 0 { 0 } else { segs };
+            op.extend_from_slice(&pp[skip..]);
+            oq.extend_from_slice(&qq[skip..]);
+            durations.push(span.end - span.start);
+        }
+        // The boundary frame is the recorded reach pose, bit for bit.
+        let b = (frames_per_phase - 1) * segs;
+        assert_eq!(&op[b..b + segs], poses[reach].positions());
+        assert_eq!(&oq[b..b + segs], poses[reach].rotations());
+        resampled.push((op, oq));
+        recordings.push((poses, dt, reach));
+    }
+    // Clip-table layout: parameter fastest, then frame.
+    for f in 0..count {
+        for (op, oq) in &resampled {
+            clip_p.extend_from_slice(&op[f * segs..(f + 1) * segs]);
+            clip_q.extend_from_slice(&oq[f * segs..(f + 1) * segs]);
+        }
+    }
+    let param = Axis::linear(0.0, 1.0, 2);
+    let phase = Axis::linear(0.0, 2.0 / (count - 1) as f32, count as u32);
+    let clips = Clips::new(
+        Grid::new(&[param, phase], None).unwrap(),
+        Grid::new(&[param], None).unwrap(),
+        2,
+    )
+    .unwrap();
+    let samples = SliceSamples::new(segs, &clip_p, &clip_q).unwrap();
+    let durs = SliceDurations {
+        phases: 2,
+        values: &durations,
+    };
+    let mut out = Pose::<64>::default();
+    for (c, (poses, dt, reach)) in recordings.iter().enumerate() {
+        let m = clips.motion(&durs, &[c as f32]).unwrap();
+        assert_eq!(m.durations(), &durations[2 * c..2 * c + 2]);
+        clips
+            .pose_at_time(&m, &samples, m.durations()[0], &mut out)
+            .unwrap();
+        assert_eq!(out.positions(), poses[*reach].positions());
+        assert_eq!(out.rotations(), poses[*reach].rotations());
+        // Held-out error: the 2×17-frame clip against all recorded frames.
+        let (mut max_p, mut sum_p, mut n) = (0.0f64, 0.0f64, 0usize);
+        for (f, actual) in poses.iter().enumerate() {
+            clips
+                .pose_at_time(&m, &samples, f as f32 * dt, &mut out)
+                .unwrap();
+            for s in 0..segs {
+                let e = dist(v64(out.positions[s]), v64(actual.positions[s]));
+                (max_p, sum_p, n) = (max_p.max(e), sum_p + e, n + 1);
+            }
+        }
+        println!(
+            "HDM05 {}: reach at {:.2} s of {:.2} s; 2×{frames_per_phase}-frame clip vs {} recorded frames: position error mean {:.2} mm, max {:.1} mm",
+            takes[c],
+            m.durations()[0],
+            m.duration(),
+            poses.len(),
+            sum_p / n as f64 * 1e3,
+            max_p * 1e3
+        );
+        assert!(
+            sum_p / (n as f64) < 0.02 && max_p < 0.25,
+            "{} {max_p}",
+            sum_p / n as f64
+        );
+    }
+    // Halfway between the takes: duration halfway, pose finite and between.
+    let m = clips.motion(&durs, &[0.5]).unwrap();
+    assert!((m.durations()[0] - 0.5 * (durations[0] + durations[2])).abs() < 1e-5);
+    clips
+        .pose_at_time(&m, &samples, 0.5 * m.duration(), &mut out)
+        .unwrap();
+    assert!(out.positions().iter().all(|p| p.is_finite()));
+}
