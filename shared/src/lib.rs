@@ -37,6 +37,7 @@ pub mod goal;
 pub mod grid;
 pub mod math;
 pub mod pose;
+pub mod rig;
 pub mod servo;
 pub mod solve;
 pub mod table;
