@@ -6,6 +6,8 @@
 
 pub mod blob;
 pub mod cmd;
+pub mod flash;
 pub mod icount;
 pub mod import;
 pub mod qemu;
+pub mod render;

@@ -18,6 +18,12 @@ enum Command {
     Emulate(cmd::emulate::Args),
     /// Instruction counts of the core on the emulated Cortex-M4F.
     Icount(cmd::icount::Args),
+    /// Draw a pose and its goals in four views (front, side, top, perspective).
+    Render(cmd::render::Args),
+    /// Draw curves over time from a CSV file (time column first).
+    Plot(cmd::plot::Args),
+    /// Flash the firmware ELF and/or the table blob with probe-rs.
+    Flash(cmd::flash::Args),
 }
 
 fn main() -> ExitCode {
@@ -25,6 +31,9 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Emulate(args) => cmd::emulate::run(&args),
         Command::Icount(args) => cmd::icount::run(&args),
+        Command::Render(args) => cmd::render::run(&args),
+        Command::Plot(args) => cmd::plot::run(&args),
+        Command::Flash(args) => cmd::flash::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

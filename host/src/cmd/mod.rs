@@ -2,7 +2,10 @@
 //! `run(&Args) -> Result<(), CmdError>`.
 
 pub mod emulate;
+pub mod flash;
 pub mod icount;
+pub mod plot;
+pub mod render;
 
 /// An error from any subcommand, printed by `main` as `marionette: <error>`.
 pub type CmdError = Box<dyn std::error::Error + Send + Sync>;

@@ -1,0 +1,306 @@
+//! `marionette render`: a pose and its goals in four views (POSIT, Figure 2).
+//!
+//! The pose is a JSON file of world-space segment placements, the form
+//! `marionette synth`/`solve` print:
+//!
+//! ```json
+//! {"segments": [{"name": "lower_torso", "position": [0, 0.95, 0], "rotation": [1, 0, 0, 0]}, ...]}
+//! ```
+//!
+//! `position` is the segment's joint origin (metres), `rotation` its world
+//! orientation `[w, x, y, z]`. Every segment of the body must appear once, in
+//! any order; other fields are ignored. Without `--pose` the body's rest pose
+//! is drawn (core forward kinematics, lifted so the lowest point is on the
+//! floor).
+//!
+//! Goals are a JSON list (bare, or as `{"goals": [...]}`) of
+//! `{"segment": "left_hand", "target": [x, y, z], "weight": 10}`; `segment`
+//! may be a name or an index, `weight` defaults to 1, and an optional
+//! `"point": [x, y, z]` (segment frame) replaces the touch point. The
+//! drawing joins the pulled point to the target.
+
+use super::CmdError;
+use crate::render::{self, Camera, Figure, Mark, RenderOptions};
+use glam::{DQuat, DVec3};
+use marionette_core::body::{self, Angles, Body};
+use marionette_core::pose::{LocalPose, MAX_SEGMENTS, Pose};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// A body shipped with the core.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BodyName {
+    /// The TEMPUS-like 18-segment humanoid (POSIT, Figure 13).
+    Tempus,
+    /// The CMU 31-joint mocap skeleton.
+    Cmu,
+}
+
+impl BodyName {
+    /// The core body.
+    #[must_use]
+    pub fn body(self) -> Body<'static> {
+        match self {
+            BodyName::Tempus => body::tempus::BODY,
+            BodyName::Cmu => body::cmu::BODY,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            BodyName::Tempus => "tempus",
+            BodyName::Cmu => "cmu",
+        }
+    }
+}
+
+/// Arguments of `marionette render`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The body the pose belongs to.
+    #[arg(long, value_enum, default_value = "tempus")]
+    pub body: BodyName,
+    /// World pose JSON (`{"segments":[{"name","position","rotation"}]}`);
+    /// the rest pose if absent.
+    #[arg(long)]
+    pub pose: Option<PathBuf>,
+    /// Goals JSON (`[{"segment","target","weight"}]`).
+    #[arg(long)]
+    pub goals: Option<PathBuf>,
+    /// Output picture, `.png` or `.svg`.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Caption (default: the pose file and body).
+    #[arg(long)]
+    pub title: Option<String>,
+    /// Width in pixels.
+    #[arg(long, default_value_t = 1200)]
+    pub width: u32,
+    /// Height in pixels.
+    #[arg(long, default_value_t = 1200)]
+    pub height: u32,
+    /// Perspective camera: degrees from the front towards the figure's left.
+    #[arg(long, default_value_t = 35.0, allow_negative_numbers = true)]
+    pub azimuth: f64,
+    /// Perspective camera: degrees above the horizon.
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
+    pub elevation: f64,
+}
+
+/// A pose file.
+#[derive(Debug, Deserialize)]
+pub struct PoseFile {
+    /// World placements, one per segment.
+    pub segments: Vec<SegmentPlacement>,
+}
+
+/// One segment's world placement in a pose file.
+#[derive(Debug, Deserialize)]
+pub struct SegmentPlacement {
+    /// Segment name, as in the body.
+    pub name: String,
+    /// Joint origin, metres.
+    pub position: [f64; 3],
+    /// Orientation `[w, x, y, z]`.
+    pub rotation: [f64; 4],
+}
+
+/// A goal in a goals file.
+#[derive(Debug, Deserialize)]
+pub struct GoalEntry {
+    /// The segment pulled, by name or index.
+    pub segment: SegmentRef,
+    /// Where the point should be (metres, world).
+    #[serde(alias = "location", alias = "position")]
+    pub target: [f64; 3],
+    /// The goal's weight (0 = inactive).
+    #[serde(default = "one")]
+    pub weight: f64,
+    /// The pulled point in the segment's frame (default: its touch point).
+    #[serde(default)]
+    pub point: Option<[f64; 3]>,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// A segment named or numbered.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub enum SegmentRef {
+    /// By index.
+    Index(usize),
+    /// By name.
+    Name(String),
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum GoalsFile {
+    List(Vec<GoalEntry>),
+    Object { goals: Vec<GoalEntry> },
+}
+
+/// The body's rest pose in world space, lifted so its lowest joint origin or
+/// touch point is on the floor (`y = 0`).
+pub fn rest_pose(body: &Body<'_>) -> Result<Vec<(DVec3, DQuat)>, CmdError> {
+    let angles = Angles::<MAX_SEGMENTS>::rest(body).map_err(|e| format!("rest pose: {e:?}"))?;
+    let mut local = LocalPose::<MAX_SEGMENTS>::default();
+    let mut pose = Pose::<MAX_SEGMENTS>::default();
+    angles
+        .forward(body, &mut local, &mut pose)
+        .map_err(|e| format!("forward kinematics: {e:?}"))?;
+    let mut world: Vec<(DVec3, DQuat)> = pose
+        .positions()
+        .iter()
+        .zip(pose.rotations())
+        .map(|(p, q)| (p.as_dvec3(), q.as_dquat()))
+        .collect();
+    let lowest = (0..world.len())
+        .filter_map(|i| render::touch_point(body, &world, i))
+        .chain(world.iter().map(|w| w.0))
+        .map(|p| p.y)
+        .fold(f64::INFINITY, f64::min);
+    if lowest.is_finite() {
+        for (p, _) in &mut world {
+            p.y -= lowest;
+        }
+    }
+    Ok(world)
+}
+
+/// Reads a pose file and orders its placements as the body's segments.
+pub fn read_pose(body: &Body<'_>, path: &Path) -> Result<Vec<(DVec3, DQuat)>, CmdError> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let file: PoseFile =
+        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    world_from_file(body, &file).map_err(|e| format!("{}: {e}", path.display()).into())
+}
+
+/// Orders a pose file's placements as the body's segments; every segment
+/// must appear exactly once and no other.
+pub fn world_from_file(body: &Body<'_>, file: &PoseFile) -> Result<Vec<(DVec3, DQuat)>, String> {
+    let unknown: Vec<&str> = file
+        .segments
+        .iter()
+        .map(|s| s.name.as_str())
+        .filter(|n| body.find(n).is_none())
+        .collect();
+    if !unknown.is_empty() {
+        return Err(format!(
+            "segments not in the body: {} (wrong --body?)",
+            unknown.join(", ")
+        ));
+    }
+    body.segments
+        .iter()
+        .map(|seg| {
+            let mut found = file.segments.iter().filter(|s| s.name == seg.name);
+            let s = found
+                .next()
+                .ok_or_else(|| format!("segment {:?} is missing", seg.name))?;
+            if found.next().is_some() {
+                return Err(format!("segment {:?} appears twice", seg.name));
+            }
+            let [w, x, y, z] = s.rotation;
+            let q = DQuat::from_xyzw(x, y, z, w);
+            let p = DVec3::from_array(s.position);
+            if !(p.is_finite() && q.is_finite() && q.length() > 1e-6) {
+                return Err(format!("segment {:?}: bad position or rotation", seg.name));
+            }
+            Ok((p, q.normalize()))
+        })
+        .collect()
+}
+
+/// Reads a goals file into marks on a posed body.
+pub fn read_goals(
+    body: &Body<'_>,
+    world: &[(DVec3, DQuat)],
+    path: &Path,
+) -> Result<Vec<Mark>, CmdError> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let file: GoalsFile =
+        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    let entries = match file {
+        GoalsFile::List(g) | GoalsFile::Object { goals: g } => g,
+    };
+    entries
+        .iter()
+        .map(|g| mark(body, world, g).map_err(|e| format!("{}: {e}", path.display()).into()))
+        .collect()
+}
+
+/// One goal as a mark: its target and the point it pulls.
+pub fn mark(body: &Body<'_>, world: &[(DVec3, DQuat)], g: &GoalEntry) -> Result<Mark, String> {
+    let index = match &g.segment {
+        SegmentRef::Index(i) => *i,
+        SegmentRef::Name(n) => body
+            .find(n)
+            .map(usize::from)
+            .ok_or_else(|| format!("goal on unknown segment {n:?}"))?,
+    };
+    let seg = body
+        .segment(index)
+        .ok_or_else(|| format!("goal on segment {index}, the body has {}", body.len()))?;
+    let (origin, rotation) = world
+        .get(index)
+        .copied()
+        .ok_or_else(|| format!("no placement for segment {index}"))?;
+    let local = g.point.map_or(seg.touch.as_dvec3(), DVec3::from_array);
+    let target = DVec3::from_array(g.target);
+    if !target.is_finite() || !g.weight.is_finite() {
+        return Err(format!("goal on {}: target or weight not finite", seg.name));
+    }
+    let label = if g.weight == 0.0 {
+        format!("{} (inactive)", seg.name)
+    } else {
+        format!("{} ×{}", seg.name, g.weight)
+    };
+    Ok(Mark {
+        target,
+        from: Some(origin + rotation * local),
+        label,
+    })
+}
+
+/// Builds the figure the arguments describe.
+pub fn figure(args: &Args) -> Result<Figure, CmdError> {
+    let body = args.body.body();
+    let world = match &args.pose {
+        Some(path) => read_pose(&body, path)?,
+        None => rest_pose(&body)?,
+    };
+    let title = args.title.clone().unwrap_or_else(|| match &args.pose {
+        Some(p) => format!("{} ({})", p.display(), args.body.name()),
+        None => format!("{} rest pose", args.body.name()),
+    });
+    let mut fig = Figure::from_world(&body, &world, title)?;
+    if let Some(path) = &args.goals {
+        fig.goals = read_goals(&body, &world, path)?;
+    }
+    Ok(fig)
+}
+
+/// Draws the figure and says where.
+pub fn run(args: &Args) -> Result<(), CmdError> {
+    let fig = figure(args)?;
+    let opt = RenderOptions {
+        width: args.width,
+        height: args.height,
+        camera: Camera {
+            azimuth_deg: args.azimuth,
+            elevation_deg: args.elevation,
+            ..Camera::default()
+        },
+    };
+    render::render_with(&fig, &args.output, &opt)?;
+    println!(
+        "{}: {} bones, {} goals, four views",
+        args.output.display(),
+        fig.bones.len(),
+        fig.goals.len()
+    );
+    Ok(())
+}
