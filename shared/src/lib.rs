@@ -36,6 +36,7 @@ pub mod frame;
 pub mod goal;
 pub mod grid;
 pub mod math;
+pub mod output;
 pub mod pose;
 pub mod rig;
 pub mod servo;
