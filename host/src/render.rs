@@ -1268,3 +1268,206 @@ fn runs(time: &[f64], values: &[f64]) -> Vec<Vec<(f64, f64)>> {
     out.retain(|r| !r.is_empty());
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn proj(view: View) -> Projector {
+        Projector {
+            view,
+            scale: 100.0,
+            centre: (0.0, 0.0),
+            pixel: (300.0, 300.0),
+        }
+    }
+
+    fn px(view: View, x: f64, y: f64, z: f64) -> (i32, i32) {
+        proj(view).px(DVec3::new(x, y, z)).unwrap()
+    }
+
+    #[test]
+    fn orthographic_views_are_y_up_with_one_scale() {
+        // Front: +X right, +Y up (pixel y grows downwards).
+        assert_eq!(px(View::Front, 0.0, 0.0, 0.0), (300, 300));
+        assert_eq!(px(View::Front, 1.0, 0.0, 0.0), (400, 300));
+        assert_eq!(px(View::Front, 0.0, 1.0, 0.0), (300, 200));
+        assert_eq!(px(View::Front, 0.0, 0.0, 1.0), (300, 300));
+        // Side: +Z right, +Y up.
+        assert_eq!(px(View::Side, 0.0, 0.0, 1.0), (400, 300));
+        assert_eq!(px(View::Side, 0.0, 1.0, 0.0), (300, 200));
+        assert_eq!(px(View::Side, 1.0, 0.0, 0.0), (300, 300));
+        // Top: +X right, +Z (the figure's front) down.
+        assert_eq!(px(View::Top, 1.0, 0.0, 0.0), (400, 300));
+        assert_eq!(px(View::Top, 0.0, 0.0, 1.0), (300, 400));
+        assert_eq!(px(View::Top, 0.0, 1.0, 0.0), (300, 300));
+    }
+
+    #[test]
+    fn shared_scale_is_set_by_the_tightest_view() {
+        let b = Bounds {
+            min: DVec3::new(-0.5, 0.0, -0.1),
+            max: DVec3::new(0.5, 2.0, 0.1),
+            floor: 0.0,
+        };
+        let r = Region {
+            centre: (200.0, 200.0),
+            size: (400.0, 400.0),
+        };
+        // Height 2 m (+12 %) in 400 px limits front and side; depth 0.2 m is
+        // padded to the 0.3 m minimum.
+        let want = 400.0 / (2.0 * 1.12);
+        assert!((ortho_scale(&b, &r) - want).abs() < 1e-9);
+        let front = ortho_projector(View::Front, &b, &r, want);
+        // The box centre (0, 1, 0) is drawn at the region centre.
+        assert_eq!(front.px(DVec3::new(0.0, 1.0, 0.0)), Some((200, 200)));
+    }
+
+    #[test]
+    fn perspective_looks_from_the_camera() {
+        let camera = Camera {
+            azimuth_deg: 0.0,
+            elevation_deg: 0.0,
+            fov_deg: 40.0,
+        };
+        let eye = Eye::new(&camera, DVec3::ZERO, 1.0);
+        // Straight from the front: like the front view near the centre.
+        let (u, v) = eye.uv(DVec3::new(0.1, 0.2, 0.0)).unwrap();
+        assert!(u > 0.0 && v > 0.0);
+        assert!((v / u - 2.0).abs() < 1e-12);
+        // Nearer things look bigger; behind the camera is not drawn.
+        let near = eye.uv(DVec3::new(0.1, 0.0, 0.5)).unwrap().0;
+        let far = eye.uv(DVec3::new(0.1, 0.0, -0.5)).unwrap().0;
+        assert!(near > far && far > 0.0);
+        let behind = eye.position + DVec3::Z;
+        assert!(eye.uv(behind).is_none());
+        // From the figure's left (+X), +Z goes to the right of the screen.
+        let side = Eye::new(
+            &Camera {
+                azimuth_deg: 90.0,
+                ..camera
+            },
+            DVec3::ZERO,
+            1.0,
+        );
+        assert!(side.uv(DVec3::new(0.0, 0.0, -0.1)).unwrap().0 > 0.0);
+    }
+
+    #[test]
+    fn sides_from_names() {
+        for n in ["left_hand", "LeftArm", "LHipJoint", "LThumb", "l_knee"] {
+            assert_eq!(Side::of(n), Side::Left, "{n}");
+        }
+        for n in ["right_foot", "RightUpLeg", "RHipJoint", "r_knee"] {
+            assert_eq!(Side::of(n), Side::Right, "{n}");
+        }
+        for n in [
+            "LowerBack",
+            "Hips",
+            "lower_torso",
+            "Head",
+            "Spine1",
+            "L",
+            "",
+        ] {
+            assert_eq!(Side::of(n), Side::Centre, "{n}");
+        }
+    }
+
+    #[test]
+    fn nice_lengths() {
+        let cases = [
+            (0.3, 0.5),
+            (0.21, 0.25),
+            (0.25, 0.25),
+            (1.0, 1.0),
+            (3.0, 5.0),
+            (0.07, 0.1),
+            (12.0, 20.0),
+        ];
+        for (x, want) in cases {
+            assert!((nice(x) - want).abs() < 1e-12, "nice({x}) = {}", nice(x));
+        }
+        assert_eq!(nice(0.0), 1.0);
+        assert_eq!(nice(f64::NAN), 1.0);
+    }
+
+    #[test]
+    fn floor_grid_is_centred_under_the_figure() {
+        let b = Bounds {
+            min: DVec3::new(-0.3, 0.0, -0.1),
+            max: DVec3::new(0.3, 1.8, 0.1),
+            floor: 0.0,
+        };
+        // Half side 0.3 + 0.15 = 0.45, step nice(0.15) = 0.2, 3 steps each way.
+        let (x0, z0, span, step) = b.floor_square();
+        assert_eq!((x0, z0, step), (0.0, 0.0, 0.2));
+        assert!((span - 0.6).abs() < 1e-12);
+        let grid = b.floor_grid();
+        assert_eq!(grid.len(), 2 * 7);
+        assert!(grid.iter().all(|(p, q)| p.y == 0.0 && q.y == 0.0));
+    }
+
+    #[test]
+    fn csv_time_units_gaps_and_comments() {
+        let text = "# servo targets\ntime_us, ch0 ,ch1\n0,1500,1000\n\n500000,1600,\n1000000,1700.5,1200\n";
+        let s = Series::parse_csv(text).unwrap();
+        assert_eq!(s.time_label, "time (s)");
+        assert_eq!(s.time, vec![0.0, 0.5, 1.0]);
+        assert_eq!(s.columns.len(), 2);
+        assert_eq!(s.columns[0].name, "ch0");
+        assert_eq!(s.columns[0].values, vec![1500.0, 1600.0, 1700.5]);
+        assert_eq!(s.columns[1].values[0], 1000.0);
+        assert!(s.columns[1].values[1].is_nan());
+        let secs = Series::parse_csv("time_s,a\n0.25,1\n").unwrap();
+        assert_eq!(secs.time, vec![0.25]);
+        let other = Series::parse_csv("frame,a\n7,1\n").unwrap();
+        assert_eq!((other.time_label.as_str(), other.time[0]), ("frame", 7.0));
+    }
+
+    #[test]
+    fn csv_errors_name_the_line() {
+        let line = |text: &str| match Series::parse_csv(text) {
+            Err(RenderError::Csv { line, .. }) => line,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(line(""), 0);
+        assert_eq!(line("time_us,a\n0,1\n# c\n1,2,3\n"), 4);
+        assert_eq!(line("time_us,a\n0,x\n"), 2);
+        assert_eq!(line("time_us,a\n,1\n"), 2);
+    }
+
+    #[test]
+    fn select_keeps_the_order_asked() {
+        let mut s = Series::parse_csv("t,a,b,c\n0,1,2,3\n").unwrap();
+        s.select(&["c".into(), "a".into()]).unwrap();
+        let names: Vec<&str> = s.columns.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, ["c", "a"]);
+        assert_eq!(s.columns[0].values, vec![3.0]);
+        let err = s.select(&["zz".into()]).unwrap_err();
+        assert!(err.to_string().contains("\"zz\""), "{err}");
+    }
+
+    #[test]
+    fn gaps_split_lines() {
+        let t = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0];
+        let v = [1.0, 2.0, f64::NAN, f64::NAN, 5.0, 6.0];
+        assert_eq!(
+            runs(&t, &v),
+            vec![vec![(0.0, 1.0), (1.0, 2.0)], vec![(4.0, 5.0), (5.0, 6.0)]]
+        );
+        assert!(runs(&t, &[f64::NAN; 6]).is_empty());
+    }
+
+    #[test]
+    fn tempus_rest_figure_has_a_bone_per_joint_and_leaf() {
+        let body = marionette_core::body::tempus::BODY;
+        let world: Vec<(DVec3, DQuat)> = vec![(DVec3::ZERO, DQuat::IDENTITY); body.len()];
+        let fig = Figure::from_world(&body, &world, "t").unwrap();
+        // 17 child segments, and 5 leaves (head, hands, feet) with a touch
+        // point off their origin.
+        assert_eq!(fig.bones.len(), 17 + 5);
+        assert_eq!(fig.touches.len(), 18);
+        assert!(Figure::from_world(&body, &world[1..], "t").is_err());
+    }
+}

@@ -304,3 +304,105 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     );
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use marionette_core::body::tempus::index;
+
+    fn close(a: DVec3, b: DVec3) -> bool {
+        (a - b).length() < 1e-5
+    }
+
+    #[test]
+    fn tempus_rest_pose_stands_on_the_floor() {
+        let body = body::tempus::BODY;
+        let world = rest_pose(&body).unwrap();
+        // From the joint table in body/tempus.rs: pelvis 0.95 m up; left hand
+        // palm at x = 0.02 + 0.16, y = 0.95 + 0.10 + 0.38 − 0.30 − 0.26 − 0.08;
+        // the foot's touch point on the sole, 0.14 m forward.
+        assert!(close(world[0].0, DVec3::new(0.0, 0.95, 0.0)));
+        let hand = render::touch_point(&body, &world, index::LEFT_HAND.into()).unwrap();
+        assert!(close(hand, DVec3::new(0.18, 0.79, 0.0)), "{hand}");
+        let foot = render::touch_point(&body, &world, index::RIGHT_FOOT.into()).unwrap();
+        assert!(close(foot, DVec3::new(-0.09, 0.0, 0.14)), "{foot}");
+        let head = render::touch_point(&body, &world, index::HEAD.into()).unwrap();
+        assert!(close(head, DVec3::new(0.0, 1.67, 0.0)), "{head}");
+    }
+
+    fn placement(name: &str, y: f64) -> SegmentPlacement {
+        SegmentPlacement {
+            name: name.into(),
+            position: [0.0, y, 0.0],
+            rotation: [1.0, 0.0, 0.0, 0.0],
+        }
+    }
+
+    #[test]
+    fn pose_file_is_matched_by_name() {
+        let body = body::tempus::BODY;
+        // Reversed order on purpose.
+        let segments: Vec<SegmentPlacement> = body
+            .segments
+            .iter()
+            .enumerate()
+            .rev()
+            .map(|(i, s)| placement(s.name, i as f64))
+            .collect();
+        let mut file = PoseFile { segments };
+        let world = world_from_file(&body, &file).unwrap();
+        assert!(world.iter().enumerate().all(|(i, w)| w.0.y == i as f64));
+
+        file.segments[0].rotation = [2.0, 0.0, 0.0, 0.0];
+        let world = world_from_file(&body, &file).unwrap();
+        assert!((world[17].1.length() - 1.0).abs() < 1e-12, "normalized");
+
+        file.segments.push(placement("tail", 0.0));
+        let err = world_from_file(&body, &file).unwrap_err();
+        assert!(err.contains("tail") && err.contains("--body"), "{err}");
+        file.segments.pop();
+        file.segments.push(placement("head", 0.0));
+        assert!(world_from_file(&body, &file).unwrap_err().contains("twice"));
+        file.segments.pop();
+        file.segments.retain(|s| s.name != "neck");
+        assert!(
+            world_from_file(&body, &file)
+                .unwrap_err()
+                .contains("\"neck\" is missing")
+        );
+    }
+
+    #[test]
+    fn goals_pull_touch_points_or_given_points() {
+        let body = body::tempus::BODY;
+        let world = rest_pose(&body).unwrap();
+        let json = r#"{"goals": [
+            {"segment": "left_hand", "target": [0.3, 1.2, 0.4], "weight": 10},
+            {"segment": 11, "location": [0, 0, 0], "point": [0, -0.26, 0]},
+            {"segment": "head", "target": [0, 2, 0], "weight": 0}
+        ]}"#;
+        let GoalsFile::Object { goals } = serde_json::from_str(json).unwrap() else {
+            panic!("object form")
+        };
+        let marks: Vec<Mark> = goals
+            .iter()
+            .map(|g| mark(&body, &world, g).unwrap())
+            .collect();
+        assert_eq!(marks[0].label, "left_hand ×10");
+        assert!(close(marks[0].from.unwrap(), DVec3::new(0.18, 0.79, 0.0)));
+        assert!(close(marks[0].target, DVec3::new(0.3, 1.2, 0.4)));
+        // Right hand (11): weight 1 by default; its origin is at
+        // (−0.18, 0.95 + 0.10 + 0.38 − 0.30 − 0.26, 0) = (−0.18, 0.87, 0), and
+        // the given point is 0.26 m below it.
+        assert_eq!(marks[1].label, "right_hand ×1");
+        assert!(close(marks[1].from.unwrap(), DVec3::new(-0.18, 0.61, 0.0)));
+        assert_eq!(marks[2].label, "head (inactive)");
+
+        let bad: GoalEntry =
+            serde_json::from_str(r#"{"segment": "tail", "target": [0, 0, 0]}"#).unwrap();
+        assert!(mark(&body, &world, &bad).unwrap_err().contains("tail"));
+        let bad: GoalEntry =
+            serde_json::from_str(r#"{"segment": 40, "target": [0, 0, 0]}"#).unwrap();
+        assert!(mark(&body, &world, &bad).unwrap_err().contains("40"));
+    }
+}
