@@ -266,8 +266,13 @@ impl Samples for SliceSamples<'_> {
         if segment >= self.segments {
             return None;
         }
-        let i = index.checked_mul(self.segments)?.checked_add(segment)?;
-        Some((*self.positions.get(i)?, *self.rotations.get(i)?))
+        // A wrapped product can only land on some other sample, never out of
+        // bounds (the slices are checked), so plain wrapping arithmetic is safe.
+        let i = index.wrapping_mul(self.segments).wrapping_add(segment);
+        match (self.positions.get(i), self.rotations.get(i)) {
+            (Some(&p), Some(&q)) => Some((p, q)),
+            _ => None,
+        }
     }
 }
 
@@ -691,7 +696,8 @@ fn to_cell_units(axis: &Axis, inv_step: f32, p: f32) -> (f32, bool) {
     let tol = 4.0 * f32::EPSILON * (1.0 + math::abs(u) + math::abs(axis.min) * inv_step);
     match axis.kind {
         AxisKind::Bounded => {
-            let c = snap(u.clamp(0.0, n - 1.0), tol);
+            // max/min, not clamp: clamp asserts lo <= hi, a panic path.
+            let c = snap(u.max(0.0).min(n - 1.0), tol);
             (c, math::abs(c - u) > tol)
         }
         AxisKind::Cyclic { .. } => {
@@ -738,7 +744,7 @@ fn locate(axis: &Axis, u: f32) -> Located {
 fn nearest_in_cell(axis: &Axis, u: f32, k: u32) -> (f32, f32) {
     let lo = k as f32;
     let one = |v: f32| {
-        let c = v.clamp(lo, lo + 1.0);
+        let c = v.max(lo).min(lo + 1.0);
         (math::abs(v - c), c - lo)
     };
     match axis.kind {
@@ -834,11 +840,19 @@ impl Query {
     /// Interpolates every segment of the samples into `out` (`out.count` is set
     /// to the source's segment count).
     ///
-    /// Segments are processed in blocks (as many as fit `MAX_WINDOW` window
-    /// entries, 8 for a trilinear window) level by level, with the rotation
-    /// components stored per component; on targets with SIMD the slerps of
-    /// four segments run as [`math::F4`] lanes. The arithmetic per segment is
-    /// exactly that of [`Query::segment`] (same bits).
+    /// On targets with SIMD (the host) segments are processed in blocks (as
+    /// many as fit `MAX_WINDOW` window entries, 8 for a trilinear window)
+    /// level by level, rotations stored per component, and the slerps of
+    /// four segments run as [`math::F4`] lanes. On the Cortex-M (no SIMD)
+    /// each segment runs through the scalar path of [`Query::segment`] with a
+    /// window-sized buffer (an unrolled tree for three linear axes). Both
+    /// paths perform the same operations in the same order per segment, so
+    /// they give the same bits (tested).
+    ///
+    /// On the firmware keep one [`Query`] across frames and refill it with
+    /// [`Grid::query_into`]: building a fresh `Query` (as [`Grid::query`] and
+    /// [`Grid::synthesize`] do) costs a few thousand instructions of
+    /// initialization and copying.
     pub fn pose<S: Samples, const N: usize>(
         &self,
         samples: &S,
@@ -849,6 +863,9 @@ impl Query {
             return Err(GridError::Capacity);
         }
         out.count = n;
+        if !WIDE {
+            return self.pose_scalar(samples, out, n);
+        }
         let block = MAX_WINDOW.checked_div(self.len).unwrap_or(1).max(1);
         let mut buf = Soa::new();
         let mut first = 0;
@@ -873,17 +890,105 @@ impl Query {
         Ok(())
     }
 
-    /// Interpolates one segment.
+    /// Interpolates one segment (the scalar path the Cortex-M uses for
+    /// every segment).
     pub fn segment<S: Samples>(
         &self,
         samples: &S,
         segment: usize,
     ) -> Result<(Vec3, Quat), GridError> {
-        let mut buf = Soa::new();
-        let mut pos = [Vec3::ZERO];
-        self.fetch(samples, segment, 1, &mut pos, &mut buf)?;
-        self.reduce(&mut buf, 1, 1);
-        Ok((pos[0], buf.get(0)))
+        let mut out = (Vec3::ZERO, Quat::IDENTITY);
+        let slots = (
+            core::slice::from_mut(&mut out.0),
+            core::slice::from_mut(&mut out.1),
+        );
+        match self.len {
+            0..=2 => self.scalar::<S, 2>(samples, segment, slots)?,
+            3..=4 => self.scalar::<S, 4>(samples, segment, slots)?,
+            5..=8 => self.scalar::<S, 8>(samples, segment, slots)?,
+            9..=16 => self.scalar::<S, 16>(samples, segment, slots)?,
+            _ => self.scalar::<S, MAX_WINDOW>(samples, segment, slots)?,
+        }
+        Ok(out)
+    }
+
+    /// All segments through the scalar path (no scratch beyond the window).
+    fn pose_scalar<S: Samples, const N: usize>(
+        &self,
+        samples: &S,
+        out: &mut Pose<N>,
+        n: usize,
+    ) -> Result<(), GridError> {
+        let positions = out.positions.get_mut(..n).unwrap_or(&mut []);
+        let rotations = out.rotations.get_mut(..n).unwrap_or(&mut []);
+        let slots = (positions, rotations);
+        match self.len {
+            0..=2 => self.scalar::<S, 2>(samples, 0, slots),
+            3..=4 => self.scalar::<S, 4>(samples, 0, slots),
+            5..=8 => self.scalar::<S, 8>(samples, 0, slots),
+            9..=16 => self.scalar::<S, 16>(samples, 0, slots),
+            _ => self.scalar::<S, MAX_WINDOW>(samples, 0, slots),
+        }
+    }
+
+    /// The three slerp weights of an all-linear three-axis query.
+    #[inline]
+    fn linear3(&self) -> Option<[&SlerpWeight; 3]> {
+        match (self.axis_count, &self.axes) {
+            (
+                3,
+                [
+                    AxisWeights::Linear(x),
+                    AxisWeights::Linear(y),
+                    AxisWeights::Linear(z),
+                    ..,
+                ],
+            ) => Some([x, y, z]),
+            _ => None,
+        }
+    }
+
+    /// Segments `first..` into `out` one at a time with a `K`-entry window
+    /// buffer (`K ≥ len`), reducing in place; the same operations per segment,
+    /// in the same order, as the blocked path.
+    fn scalar<S: Samples, const K: usize>(
+        &self,
+        samples: &S,
+        first: usize,
+        out: (&mut [Vec3], &mut [Quat]),
+    ) -> Result<(), GridError> {
+        let mut buf = [Quat::IDENTITY; K];
+        for (seg, (p, r)) in out.0.iter_mut().zip(out.1.iter_mut()).enumerate() {
+            let mut acc = Vec3::ZERO;
+            for ((slot, &index), &w) in buf.iter_mut().zip(self.window()).zip(self.weights()) {
+                let (sp, sq) = samples
+                    .sample(index as usize, first + seg)
+                    .ok_or(GridError::MissingSample)?;
+                acc += sp * w;
+                *slot = sq;
+            }
+            *p = acc;
+            *r = match (self.linear3(), buf.first_chunk::<8>()) {
+                // The W&H hand grid: an unrolled 4 + 2 + 1 tree (same
+                // operations in the same order as the loop below).
+                (Some([wx, wy, wz]), Some(&[q0, q1, q2, q3, q4, q5, q6, q7])) => {
+                    let (a, b) = (wx.apply(q0, q1), wx.apply(q2, q3));
+                    let (c, d) = (wx.apply(q4, q5), wx.apply(q6, q7));
+                    wz.apply(wy.apply(a, b), wy.apply(c, d))
+                }
+                _ => {
+                    let mut len = self.len;
+                    for axis in self.axes.iter().take(self.axis_count) {
+                        len = match axis {
+                            AxisWeights::Linear(w) => pairs_in_place(&mut buf, len, w),
+                            AxisWeights::Cubic(c) => quads_in_place(&mut buf, len, c),
+                        };
+                    }
+                    buf.first().copied().unwrap_or(Quat::IDENTITY)
+                }
+            };
+        }
+        Ok(())
     }
 
     /// Reads the window of segments `first..first + positions.len()`:
@@ -936,6 +1041,37 @@ impl Query {
             };
         }
     }
+}
+
+/// `buf[i] = slerp(buf[2i], buf[2i+1])` for `i < len/2`.
+#[inline]
+fn pairs_in_place<const K: usize>(buf: &mut [Quat; K], len: usize, w: &SlerpWeight) -> usize {
+    let half = len / 2;
+    for i in 0..half {
+        if let (Some(&a), Some(&b)) = (buf.get(2 * i), buf.get(2 * i + 1))
+            && let Some(slot) = buf.get_mut(i)
+        {
+            *slot = w.apply(a, b);
+        }
+    }
+    half
+}
+
+/// `buf[i] = spherical Catmull-Rom(buf[4i..4i+4])` for `i < len/4`.
+#[inline]
+fn quads_in_place<const K: usize>(buf: &mut [Quat; K], len: usize, c: &Cubic) -> usize {
+    let quarter = len / 4;
+    for i in 0..quarter {
+        let at = |k: usize| {
+            let q = buf.get(4 * i + k).copied().unwrap_or(Quat::IDENTITY);
+            [q.x, q.y, q.z, q.w]
+        };
+        let [x, y, z, w] = c.rotation([at(0), at(1), at(2), at(3)]);
+        if let Some(slot) = buf.get_mut(i) {
+            *slot = Quat::from_xyzw(x, y, z, w);
+        }
+    }
+    quarter
 }
 
 /// Rotation scratch, one array per quaternion component (`[x, y, z, w]`).
@@ -1119,7 +1255,7 @@ impl ParamLimiter {
                 d -= p * math::floor(d / p + 0.5);
             }
             let m = r * dt;
-            *s += d.clamp(-m, m);
+            *s += d.max(-m).min(m);
             if p > 0.0 {
                 *s -= p * math::floor(*s / p);
             }

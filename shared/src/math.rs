@@ -550,7 +550,7 @@ fn weight_poly(s: f32) -> [f32; 6] {
 
 /// Evaluates a degree-5 polynomial in `x` given `x²`, `x⁴` (Estrin's scheme:
 /// the same operation count as Horner with a third of its latency).
-#[inline]
+#[inline(always)]
 fn poly5<T: Lane>(c: &[f32; 6], x: T, x2: T, x4: T) -> T {
     let [c0, c1, c2, c3, c4, c5] = *c;
     let (c0, c1, c2, c3, c4, c5) = (
@@ -704,7 +704,7 @@ impl SlerpWeight {
     }
 
     /// Slerp from `a` to `b` (unit quaternions, shortest arc) at this weight.
-    #[inline]
+    #[inline(always)]
     #[must_use]
     pub fn apply(&self, a: Quat, b: Quat) -> Quat {
         match self.mode {
@@ -714,7 +714,7 @@ impl SlerpWeight {
         }
     }
 
-    #[inline]
+    #[inline(always)]
     fn mid(&self, a: Quat, b: Quat) -> Quat {
         let [x, y, z, w] = self.kernel([a.x, a.y, a.z, a.w], [b.x, b.y, b.z, b.w]);
         Quat::from_xyzw(x, y, z, w)
@@ -725,7 +725,7 @@ impl SlerpWeight {
     /// per lane, endpoints included).
     ///
     /// [`apply`]: SlerpWeight::apply
-    #[inline]
+    #[inline(always)]
     #[must_use]
     pub fn apply_lanes<T: Lane>(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
         match self.mode {
@@ -735,7 +735,7 @@ impl SlerpWeight {
         }
     }
 
-    #[inline]
+    #[inline(always)]
     fn kernel<T: Lane>(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
         let [ax, ay, az, aw] = a;
         let [bx, by, bz, bw] = b;
