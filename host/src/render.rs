@@ -1220,6 +1220,8 @@ fn draw_plot<DB: DrawingBackend>(
     if font {
         mesh.x_desc(&series.time_label)
             .y_desc(&opt.y_label)
+            .x_label_formatter(&|v| tick(*v))
+            .y_label_formatter(&|v| tick(*v))
             .label_style((FAMILY, 14))
             .axis_desc_style((FAMILY, 16));
     } else {
@@ -1251,6 +1253,17 @@ fn draw_plot<DB: DrawingBackend>(
             .map_err(de)?;
     }
     Ok(())
+}
+
+/// A tick label: at most six decimals, no trailing zeros (`1900`, `0.25`).
+fn tick(v: f64) -> String {
+    let text = format!("{v:.6}");
+    let text = text.trim_end_matches('0').trim_end_matches('.');
+    if text == "-0" {
+        "0".into()
+    } else {
+        text.into()
+    }
 }
 
 /// The stretches of finite samples of one column (a gap splits the line).
@@ -1446,6 +1459,21 @@ mod tests {
         assert_eq!(s.columns[0].values, vec![3.0]);
         let err = s.select(&["zz".into()]).unwrap_err();
         assert!(err.to_string().contains("\"zz\""), "{err}");
+    }
+
+    #[test]
+    fn tick_labels_are_short() {
+        let cases = [
+            (1900.0, "1900"),
+            (0.25, "0.25"),
+            (0.1 + 0.2, "0.3"),
+            (-0.0, "0"),
+            (-1.5, "-1.5"),
+            (1e-9, "0"),
+        ];
+        for (v, want) in cases {
+            assert_eq!(tick(v), want);
+        }
     }
 
     #[test]

@@ -50,7 +50,10 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         title: args
             .title
             .clone()
-            .unwrap_or_else(|| args.csv.display().to_string()),
+            .unwrap_or_else(|| match args.csv.file_name() {
+                Some(name) => name.to_string_lossy().into_owned(),
+                None => args.csv.display().to_string(),
+            }),
         y_label: args.y_label.clone(),
     };
     render::plot(&series, &args.output, &opt)?;
