@@ -10,4 +10,5 @@ pub mod flash;
 pub mod icount;
 pub mod import;
 pub mod qemu;
+pub mod rigfile;
 pub mod render;

@@ -24,6 +24,8 @@ enum Command {
     Plot(cmd::plot::Args),
     /// Flash the firmware ELF and/or the table blob with probe-rs.
     Flash(cmd::flash::Args),
+    /// Position a rig to meet weighted goals (JSON in, pose and distances out).
+    Solve(cmd::solve::Args),
 }
 
 fn main() -> ExitCode {
@@ -34,6 +36,7 @@ fn main() -> ExitCode {
         Command::Render(args) => cmd::render::run(&args),
         Command::Plot(args) => cmd::plot::run(&args),
         Command::Flash(args) => cmd::flash::run(&args),
+        Command::Solve(args) => cmd::solve::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -6,6 +6,7 @@ pub mod flash;
 pub mod icount;
 pub mod plot;
 pub mod render;
+pub mod solve;
 
 /// An error from any subcommand, printed by `main` as `marionette: <error>`.
 pub type CmdError = Box<dyn std::error::Error + Send + Sync>;

@@ -338,6 +338,16 @@ pub(crate) fn quat_wxyz(q: [f32; 4]) -> Quat {
     Quat::from_xyzw(x, y, z, w)
 }
 
+/// `q` normalized (left as is when its squared norm is exactly 1).
+#[inline]
+fn unit_quat(q: Quat) -> Quat {
+    if crate::math::quat_dot(q, q) == 1.0 {
+        q
+    } else {
+        crate::math::normalize_quat(q)
+    }
+}
+
 impl<'a> Rig<'a> {
     /// Checks and decodes a rig blob (see the module doc); returns the rig and
     /// the bytes after the blob. Every field is validated
@@ -356,7 +366,7 @@ impl<'a> Rig<'a> {
             failsafe_timeout_ms: desc.failsafe_timeout_ms,
             output: desc.output,
             root_position: Vec3::from_array(desc.root_position),
-            root_rotation: crate::math::normalize_quat(quat_wxyz(desc.root_rotation)),
+            root_rotation: unit_quat(quat_wxyz(desc.root_rotation)),
             count: desc.segments.len(),
             segments: [EMPTY_SEGMENT; MAX_SEGMENTS],
             parents: [NO_PARENT; MAX_SEGMENTS],

@@ -111,6 +111,16 @@ fn cylindrical(d: Vec3, axis: super::AxisName, component: Cylinder) -> f32 {
     }
 }
 
+/// `v` normalized (left as is when its squared length is exactly 1).
+#[inline]
+fn unit_vec3(v: Vec3) -> Vec3 {
+    if v.dot(v) == 1.0 {
+        v
+    } else {
+        math::normalize_vec3(v)
+    }
+}
+
 /// Twist angle of `q` about `axis`, radians in `[−π, π]`.
 fn twist(q: Quat, axis: super::AxisName) -> f32 {
     let q = if q.w < 0.0 { -q } else { q };
@@ -240,7 +250,7 @@ impl Rig<'_> {
                 };
                 goals.push(Goal {
                     target: Target::Plane {
-                        normal: math::normalize_vec3(Vec3::from_array(normal)),
+                        normal: unit_vec3(Vec3::from_array(normal)),
                         offset,
                         side,
                     },

@@ -1,0 +1,1219 @@
+//! Rig files: the TOML description of a physical figure, read into the core's
+//! [`RigDesc`] (the schema of the rig blob) plus host-only extras (the
+//! retarget map), and written as a rig blob with [`to_blob`].
+//!
+//! Every error names the file, the 1-based line and the field
+//! (`rigs/x.toml:42: servo[3].channel: 7 is used twice`): TOML syntax and
+//! type errors through the parser's spans, name lookups here, and every
+//! other rule through the core's [`RigDesc::validate`] (the one rule set the
+//! firmware applies too), whose error names the entry and the field; the
+//! field's span is looked up here.
+//!
+//! # Format
+//!
+//! Units are SI (metres, radians, seconds, µs for pulses), axes right-handed
+//! with Y up, quaternions `[w, x, y, z]`. Angle pairs may be given in degrees
+//! instead with the `_deg` form of the key (`limits_deg`, `angle_deg`).
+//! See `rigs/humanoid16.toml` for a commented example.
+//!
+//! ```toml
+//! name = "puppet"                # ≤ 32 bytes
+//! frame_period_us = 1000         # control loop period (100 ..= 100000)
+//! failsafe_timeout_ms = 100      # no tracker data this long: servos to rest
+//! length_unit = 1.0              # metres per unit of segment origin/touch (default 1)
+//! root_position = [0, 0.44, 0]   # rest placement of the root, m (default 0)
+//! root_rotation = [1, 0, 0, 0]   # (default identity)
+//!
+//! [output]                       # kind = "pwm" (freq_hz) | "pca9685" (i2c_addr, freq_hz)
+//! kind = "maestro"               #      | "maestro" (baud)
+//! baud = 115200
+//!
+//! [[segment]]                    # root first, parents before children
+//! name = "pelvis"                # ≤ 24 bytes, unique; the root has no parent and no dofs
+//! touch = [0, 0, 0]              # touch point, segment frame (default origin)
+//! [[segment]]
+//! name = "l_shin"
+//! parent = "l_thigh"
+//! origin = [0, -0.19, 0]         # joint origin in the parent's frame
+//! dofs = [{ axis = "x", limits_deg = [0, 130] }]   # 0-3, in order, distinct axes
+//!
+//! [[servo]]
+//! channel = 6                    # unique, below the back-end's channel count
+//! joint = "l_shin"               # the segment whose joint it turns
+//! axis = "x"                     # which of its DOFs
+//! angle_deg = [-25, 155]         # joint angles at the two pulse ends
+//! pulse_us = [500, 2500]
+//! trim_us = 0                    # default 0
+//! reversed = false               # default false
+//! rest_us = 1500                 # default: the pulse of the rest angle
+//! max_speed = 5.5                # rad/s
+//! max_accel = 50                 # rad/s²
+//!
+//! [[param]]                      # params[param] = offset + scale * measure
+//! param = 0
+//! sensor = 0
+//! frame = "sensor:2"             # "world" (default) | a segment name (its rest frame) | "sensor:N"
+//! measure = "position"           # + component = "x" | "y" | "z"
+//!                                # "cylindrical": axis, center, component = "radius" | "angle" | "height"
+//!                                # "rotation": axis (twist angle about it)
+//! component = "x"
+//! scale = 0.5                    # default 1
+//! offset = 0.0                   # default 0
+//!
+//! [[goal]]                       # exactly one of sensor / plane / target
+//! segment = "r_forearm"
+//! weight = 10
+//! point = [0, -0.15, 0]          # default: the touch point
+//! target_frame = "pelvis"        # puppet frame of the target: "world" (default) or a segment
+//! sensor = 0                     # target = offset + scale * (sensor position in `frame`)
+//! frame = "sensor:2"
+//! scale = 0.5
+//! offset = [0, 0, 0]
+//! orientation_weight = 0         # > 0 adds an orientation goal (q · rotation_offset)
+//! rotation_offset = [1, 0, 0, 0]
+//! # plane = { normal = [0, 1, 0], offset = 0, side = "contact" | "above" }
+//! # target = [x, y, z]
+//!
+//! [retarget]                     # host only: mocap joint -> segment
+//! identity = false               # true: every segment takes the mocap joint of its own name
+//! [[retarget.joint]]
+//! mocap = "RightForeArm"
+//! segment = "r_forearm"
+//! rotation_offset = [1, 0, 0, 0] # optional
+//! ```
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use marionette_core::pose::NO_PARENT;
+use marionette_core::rig::{
+    AxisName, Cylinder, DofDesc, GoalMap, GoalSource, Invalid, MAX_GOALS, MAX_PARAMS, MAX_SEGMENTS,
+    MAX_SENSORS, MAX_SERVOS, Measure, Output, ParamMap, Place, Problem, RefFrame, RigDesc,
+    RigError, SegmentDesc, SensorGoal, ServoDesc,
+};
+use marionette_core::servo::Calibration;
+use marionette_core::wire::List;
+use serde::Deserialize;
+use toml::Spanned;
+
+/// A rig-file error: where (file, 1-based line; 0 if unknown), which field,
+/// and what is wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum RigFileError {
+    /// The file could not be read.
+    #[error("{file}: cannot read: {source}")]
+    Io {
+        /// The file.
+        file: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A syntax, type or rule error at a place in the file.
+    #[error("{file}:{line}: {field}: {message}")]
+    At {
+        /// The file.
+        file: String,
+        /// 1-based line (0 when no line applies).
+        line: usize,
+        /// The field, as a dotted path (`servo[3].channel`).
+        field: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// One retarget entry: which mocap joint drives which rig segment.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RetargetJoint {
+    /// The joint name in the mocap file.
+    pub mocap: String,
+    /// The rig segment index.
+    pub segment: u8,
+    /// Rotation applied after the mocap joint's (`[w, x, y, z]`, unit).
+    pub rotation_offset: [f64; 4],
+}
+
+/// A loaded rig file.
+#[derive(Clone, Debug)]
+pub struct RigFile {
+    /// Where it was read from (as given).
+    pub file: String,
+    name: String,
+    segment_names: Vec<String>,
+    desc: RigDesc<'static>,
+    /// The retarget map, in segment order of first mention.
+    pub retarget: Vec<RetargetJoint>,
+}
+
+impl RigFile {
+    /// The description, borrowing the names.
+    #[must_use]
+    pub fn desc(&self) -> RigDesc<'_> {
+        named(&self.desc, &self.name, &self.segment_names)
+    }
+
+    /// The rig's name.
+    #[must_use]
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The segment names, in order.
+    #[must_use]
+    pub fn segment_names(&self) -> &[String] {
+        &self.segment_names
+    }
+
+    /// The skeleton hash (the tables' `rig_hash`).
+    #[must_use]
+    pub fn rig_hash(&self) -> u64 {
+        self.desc().rig_hash()
+    }
+}
+
+/// `desc` with its names filled in (the stored one has empty names).
+fn named<'a>(desc: &RigDesc<'static>, name: &'a str, segment_names: &'a [String]) -> RigDesc<'a> {
+    let mut segments = List::new();
+    for (s, n) in desc.segments.iter().zip(segment_names) {
+        // Same capacity as the stored list.
+        let _ = segments.push(SegmentDesc {
+            name: n.as_str(),
+            ..*s
+        });
+    }
+    RigDesc {
+        name,
+        segments,
+        ..*desc
+    }
+}
+
+/// Reads and checks a rig file.
+pub fn load(path: &Path) -> Result<RigFile, RigFileError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| RigFileError::Io {
+        file: file.clone(),
+        source,
+    })?;
+    parse(&text, &file)
+}
+
+/// The rig blob of a loaded rig file (see `marionette_core::rig`).
+pub fn to_blob(rig: &RigFile) -> Result<Vec<u8>, RigFileError> {
+    let mut out = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
+    let n = rig.desc().to_blob(&mut out).map_err(|e| RigFileError::At {
+        file: rig.file.clone(),
+        line: 0,
+        field: "rig".into(),
+        message: format!("cannot write the rig blob: {e:?}"),
+    })?;
+    out.truncate(n);
+    Ok(out)
+}
+
+/// Writes the rig blob of a rig file to `out`.
+pub fn write_blob(rig: &RigFile, out: &Path) -> Result<(), RigFileError> {
+    let blob = to_blob(rig)?;
+    std::fs::write(out, blob).map_err(|source| RigFileError::Io {
+        file: out.display().to_string(),
+        source,
+    })
+}
+
+/// Resolves the path of a rig argument: as given, or `rigs/<name>.toml`.
+#[must_use]
+pub fn resolve(arg: &Path) -> PathBuf {
+    if arg.exists() {
+        return arg.to_path_buf();
+    }
+    let candidate = Path::new("rigs").join(arg).with_extension("toml");
+    if candidate.exists() {
+        candidate
+    } else {
+        arg.to_path_buf()
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The TOML shape.
+
+type S<T> = Spanned<T>;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRig {
+    name: S<String>,
+    frame_period_us: S<u32>,
+    failsafe_timeout_ms: S<u32>,
+    length_unit: Option<S<f32>>,
+    root_position: Option<S<[f32; 3]>>,
+    root_rotation: Option<S<[f32; 4]>>,
+    output: S<RawOutput>,
+    #[serde(default)]
+    segment: Vec<S<RawSegment>>,
+    #[serde(default)]
+    servo: Vec<S<RawServo>>,
+    #[serde(default)]
+    param: Vec<S<RawParam>>,
+    #[serde(default)]
+    goal: Vec<S<RawGoal>>,
+    retarget: Option<S<RawRetarget>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawOutput {
+    kind: S<String>,
+    freq_hz: Option<S<u16>>,
+    i2c_addr: Option<S<u8>>,
+    baud: Option<S<u32>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSegment {
+    name: S<String>,
+    parent: Option<S<String>>,
+    origin: Option<S<[f32; 3]>>,
+    touch: Option<S<[f32; 3]>>,
+    dofs: Option<S<Vec<S<RawDof>>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDof {
+    axis: S<String>,
+    limits: Option<S<[f32; 2]>>,
+    limits_deg: Option<S<[f32; 2]>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawServo {
+    channel: S<u8>,
+    joint: S<String>,
+    axis: S<String>,
+    angle: Option<S<[f32; 2]>>,
+    angle_deg: Option<S<[f32; 2]>>,
+    pulse_us: S<[f32; 2]>,
+    trim_us: Option<S<f32>>,
+    reversed: Option<bool>,
+    rest_us: Option<S<f32>>,
+    max_speed: S<f32>,
+    max_accel: S<f32>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawParam {
+    param: S<u8>,
+    sensor: S<u8>,
+    frame: Option<S<String>>,
+    measure: S<String>,
+    component: Option<S<String>>,
+    axis: Option<S<String>>,
+    center: Option<S<[f32; 3]>>,
+    offset: Option<S<f32>>,
+    scale: Option<S<f32>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawGoal {
+    segment: S<String>,
+    weight: S<f32>,
+    point: Option<S<[f32; 3]>>,
+    target_frame: Option<S<String>>,
+    sensor: Option<S<u8>>,
+    frame: Option<S<String>>,
+    offset: Option<S<[f32; 3]>>,
+    scale: Option<S<f32>>,
+    orientation_weight: Option<S<f32>>,
+    rotation_offset: Option<S<[f32; 4]>>,
+    plane: Option<S<RawPlane>>,
+    target: Option<S<[f32; 3]>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPlane {
+    normal: S<[f32; 3]>,
+    offset: Option<S<f32>>,
+    side: Option<S<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRetarget {
+    #[serde(default)]
+    identity: bool,
+    #[serde(default)]
+    joint: Vec<S<RawRetargetJoint>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRetargetJoint {
+    mocap: S<String>,
+    segment: S<String>,
+    rotation_offset: Option<S<[f64; 4]>>,
+}
+
+// ---------------------------------------------------------------------------
+// Locating errors.
+
+/// Maps byte offsets to lines and dotted field paths.
+struct Source<'t> {
+    text: &'t str,
+    file: &'t str,
+}
+
+impl Source<'_> {
+    fn line(&self, offset: usize) -> usize {
+        let end = offset.min(self.text.len());
+        self.text
+            .as_bytes()
+            .get(..end)
+            .map_or(0, |b| b.iter().filter(|&&c| c == b'\n').count())
+            + 1
+    }
+
+    /// The dotted path of the key at `offset`: the enclosing `[table]` or
+    /// `[[array]]` (with its index) and the key on that line.
+    fn path_at(&self, offset: usize) -> String {
+        let mut counts: Vec<(String, usize)> = Vec::new();
+        let mut table = String::new();
+        let mut pos = 0;
+        for line in self.text.split_inclusive('\n') {
+            let start = pos;
+            pos += line.len();
+            let t = line.trim();
+            if let Some(name) = t.strip_prefix("[[").and_then(|r| r.split("]]").next()) {
+                let name = name.trim().to_string();
+                let n = match counts.iter_mut().find(|(k, _)| *k == name) {
+                    Some((_, c)) => {
+                        *c += 1;
+                        *c - 1
+                    }
+                    None => {
+                        counts.push((name.clone(), 1));
+                        0
+                    }
+                };
+                table = format!("{name}[{n}]");
+            } else if let Some(name) = t.strip_prefix('[').and_then(|r| r.split(']').next()) {
+                table = name.trim().to_string();
+            }
+            if offset < pos || pos >= self.text.len() {
+                let col = offset.saturating_sub(start);
+                let key = line
+                    .get(..col.min(line.len()))
+                    .and_then(|before| before.split('=').next())
+                    .filter(|_| line.contains('=') && !t.starts_with('['))
+                    .map(|k| k.trim().trim_matches('"').to_string())
+                    .filter(|k| !k.is_empty() && !k.contains(['{', '[', ',']));
+                return match (table.is_empty(), key) {
+                    (true, Some(k)) => k,
+                    (false, Some(k)) => format!("{table}.{k}"),
+                    (_, None) if table.is_empty() => "(top level)".into(),
+                    (_, None) => table,
+                };
+            }
+        }
+        "(end of file)".into()
+    }
+
+    fn err(
+        &self,
+        span: &Range<usize>,
+        field: impl Into<String>,
+        message: impl Into<String>,
+    ) -> RigFileError {
+        RigFileError::At {
+            file: self.file.to_string(),
+            line: self.line(span.start),
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+
+    fn toml_err(&self, e: &toml::de::Error) -> RigFileError {
+        let span = e.span().unwrap_or(0..0);
+        let message = e.message().to_string();
+        // `missing field` errors point at the table header: the path is the
+        // table's; name the field from the message.
+        let mut field = self.path_at(span.start);
+        if let Some(name) = message
+            .strip_prefix("missing field `")
+            .and_then(|m| m.strip_suffix('`'))
+        {
+            field = format!("{field}.{name}");
+        }
+        if let Some(name) = message
+            .strip_prefix("unknown field `")
+            .and_then(|m| m.split('`').next())
+        {
+            field = format!("{field}.{name}");
+        }
+        self.err(&span, field, message)
+    }
+}
+
+/// Spans of the fields the core validates, keyed as the core names them.
+#[derive(Default)]
+struct Spans {
+    fields: Vec<(Place, &'static str, Range<usize>)>,
+    entries: Vec<(Place, Range<usize>, String)>,
+}
+
+impl Spans {
+    fn field<T>(&mut self, place: Place, field: &'static str, v: &S<T>) {
+        self.fields.push((place, field, v.span()));
+    }
+
+    fn opt<T>(&mut self, place: Place, field: &'static str, v: &Option<S<T>>) {
+        if let Some(v) = v {
+            self.field(place, field, v);
+        }
+    }
+
+    fn entry(&mut self, place: Place, span: Range<usize>, path: String) {
+        self.entries.push((place, span, path));
+    }
+
+    fn locate(&self, i: &Invalid) -> (Range<usize>, String) {
+        let entry = self.entries.iter().find(|(p, ..)| *p == i.place);
+        let path = entry.map_or_else(
+            || match i.place {
+                Place::Output => "output".to_string(),
+                _ => String::new(),
+            },
+            |(.., path)| path.clone(),
+        );
+        let field = if path.is_empty() {
+            i.field.to_string()
+        } else {
+            format!("{path}.{}", i.field)
+        };
+        let span = self
+            .fields
+            .iter()
+            .find(|(p, f, _)| *p == i.place && *f == i.field)
+            .map(|(.., s)| s.clone())
+            .or_else(|| entry.map(|(_, s, _)| s.clone()))
+            .unwrap_or(0..0);
+        (span, field)
+    }
+}
+
+/// The message for a core validation problem.
+fn describe(i: &Invalid) -> String {
+    let hint = match i.field {
+        "frame_period_us" => " (100 ..= 100000 µs)",
+        "failsafe_timeout_ms" => " (1 ..= 60000 ms, and at least one frame period)",
+        "freq_hz" => " (pwm: 1 ..= 1000 Hz; pca9685: 24 ..= 1526 Hz)",
+        "i2c_addr" => " (a 7-bit address, ≤ 0x7F)",
+        "baud" => " (300 ..= 250000)",
+        "channel" => " (below the output's channel count: 16 for pca9685, 24 otherwise)",
+        "pulse_us" => " (1 ..= 4000 µs, two different values)",
+        "trim_us" => " (±1000 µs)",
+        "rest_us" => " (within pulse_us)",
+        "max_speed" | "max_accel" => " (must be > 0)",
+        "limits" => " (within ±2π rad)",
+        "name" => " (1 ..= 24 bytes for a segment, ≤ 32 for the rig)",
+        "weight" | "orientation_weight" => " (must be ≥ 0)",
+        "param" => " (0 ..= 5)",
+        "sensor" => " (0 ..= 15)",
+        _ => "",
+    };
+    match i.problem {
+        Problem::NonFinite => "not a finite number".into(),
+        Problem::OutOfRange => format!("out of range{hint}"),
+        Problem::Unordered => "min must be below max".into(),
+        Problem::Duplicate => "repeats an earlier entry".into(),
+        Problem::NotTopological => "the parent must be an earlier segment".into(),
+        Problem::BadReference => "refers to something that does not exist".into(),
+        Problem::Empty => "must not be empty (or zero)".into(),
+        Problem::NotUnit => "must have unit length".into(),
+        Problem::RootDof => "the root segment is free and takes no dofs".into(),
+        Problem::Capacity => "more entries than a rig holds".into(),
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Conversion.
+
+/// Reads a rig file's text (`file` names it in errors).
+pub fn parse(text: &str, file: &str) -> Result<RigFile, RigFileError> {
+    let src = Source { text, file };
+    let raw: RawRig = toml::from_str(text).map_err(|e| src.toml_err(&e))?;
+    Builder {
+        src: &src,
+        spans: Spans::default(),
+        names: Vec::new(),
+    }
+    .build(raw)
+}
+
+struct Builder<'s, 't> {
+    src: &'s Source<'t>,
+    spans: Spans,
+    names: Vec<String>,
+}
+
+fn axis_name(s: &str) -> Option<AxisName> {
+    match s.to_ascii_lowercase().as_str() {
+        "x" => Some(AxisName::X),
+        "y" => Some(AxisName::Y),
+        "z" => Some(AxisName::Z),
+        _ => None,
+    }
+}
+
+const DEG: f32 = core::f32::consts::PI / 180.0;
+
+impl Builder<'_, '_> {
+    fn err<T>(&self, v: &S<T>, field: &str, message: impl Into<String>) -> RigFileError {
+        self.src.err(&v.span(), field, message)
+    }
+
+    fn segment(&self, v: &S<String>, field: &str) -> Result<u8, RigFileError> {
+        self.names
+            .iter()
+            .position(|n| n == v.get_ref())
+            .and_then(|i| u8::try_from(i).ok())
+            .ok_or_else(|| self.err(v, field, format!("unknown segment {:?}", v.get_ref())))
+    }
+
+    fn axis(&self, v: &S<String>, field: &str) -> Result<AxisName, RigFileError> {
+        axis_name(v.get_ref()).ok_or_else(|| {
+            self.err(
+                v,
+                field,
+                format!("expected \"x\", \"y\" or \"z\", found {:?}", v.get_ref()),
+            )
+        })
+    }
+
+    /// A `[min, max]` pair given in radians or degrees (exactly one).
+    fn pair(
+        &self,
+        rad: &Option<S<[f32; 2]>>,
+        deg: &Option<S<[f32; 2]>>,
+        entry: &Range<usize>,
+        path: &str,
+        key: &str,
+    ) -> Result<(S<[f32; 2]>, [f32; 2]), RigFileError> {
+        match (rad, deg) {
+            (Some(r), None) => Ok((r.clone(), *r.get_ref())),
+            (None, Some(d)) => {
+                let [a, b] = *d.get_ref();
+                Ok((d.clone(), [a * DEG, b * DEG]))
+            }
+            (Some(r), Some(_)) => Err(self.err(
+                r,
+                &format!("{path}.{key}"),
+                format!("give {key} or {key}_deg, not both"),
+            )),
+            (None, None) => Err(self.src.err(
+                entry,
+                format!("{path}.{key}"),
+                format!("missing {key} (radians) or {key}_deg"),
+            )),
+        }
+    }
+
+    /// A reference frame: `"world"`, `"sensor:N"` or a segment name.
+    fn ref_frame(&self, v: &Option<S<String>>, path: &str) -> Result<RefFrame, RigFileError> {
+        let Some(v) = v else {
+            return Ok(RefFrame::World);
+        };
+        let s = v.get_ref().trim();
+        if s == "world" {
+            return Ok(RefFrame::World);
+        }
+        if let Some(id) = s.strip_prefix("sensor:") {
+            return id
+                .trim()
+                .parse::<u8>()
+                .ok()
+                .filter(|&i| usize::from(i) < MAX_SENSORS)
+                .map(RefFrame::Sensor)
+                .ok_or_else(|| {
+                    self.err(
+                        v,
+                        &format!("{path}.frame"),
+                        format!("bad sensor id in {s:?} (0 ..= 15)"),
+                    )
+                });
+        }
+        Ok(RefFrame::Segment(
+            self.segment(v, &format!("{path}.frame"))?,
+        ))
+    }
+
+    fn build(mut self, raw: RawRig) -> Result<RigFile, RigFileError> {
+        let output = self.output(&raw.output)?;
+        let mut desc = RigDesc::new("", output);
+        let r = Place::Rig;
+        self.spans.field(r, "name", &raw.name);
+        self.spans.field(r, "frame_period_us", &raw.frame_period_us);
+        self.spans
+            .field(r, "failsafe_timeout_ms", &raw.failsafe_timeout_ms);
+        self.spans.opt(r, "root_position", &raw.root_position);
+        self.spans.opt(r, "root_rotation", &raw.root_rotation);
+        desc.frame_period_us = *raw.frame_period_us.get_ref();
+        desc.failsafe_timeout_ms = *raw.failsafe_timeout_ms.get_ref();
+        desc.root_position = raw
+            .root_position
+            .as_ref()
+            .map_or([0.0; 3], |v| *v.get_ref());
+        desc.root_rotation = raw
+            .root_rotation
+            .as_ref()
+            .map_or([1.0, 0.0, 0.0, 0.0], |v| *v.get_ref());
+        let unit = match &raw.length_unit {
+            Some(u) if u.get_ref().is_finite() && *u.get_ref() > 0.0 => *u.get_ref(),
+            Some(u) => return Err(self.err(u, "length_unit", "must be a finite number > 0")),
+            None => 1.0,
+        };
+        if raw.segment.is_empty() {
+            return Err(self
+                .src
+                .err(&(0..0), "segment", "a rig needs at least one [[segment]]"));
+        }
+        for (i, s) in raw.segment.iter().enumerate() {
+            let seg = self.segment_desc(i, s, unit)?;
+            if desc.segments.push(seg).is_err() {
+                return Err(self.src.err(
+                    &s.span(),
+                    format!("segment[{i}]"),
+                    format!("more than {MAX_SEGMENTS} segments"),
+                ));
+            }
+        }
+        // The skeleton's own rules first, so that its errors are not reported
+        // as the servos' or goals' that refer to it.
+        self.check(&named(&desc, raw.name.get_ref(), &self.names))?;
+        desc.servos = self.servos(&raw.servo, &desc)?;
+        desc.params = self.params(&raw.param)?;
+        desc.goals = self.goals(&raw.goal)?;
+        let retarget = self.retarget(raw.retarget.as_ref())?;
+        let rig = RigFile {
+            file: self.src.file.to_string(),
+            name: raw.name.get_ref().clone(),
+            segment_names: self.names.clone(),
+            desc,
+            retarget,
+        };
+        self.check(&rig.desc())?;
+        Ok(rig)
+    }
+
+    /// The core's validation of what has been built so far.
+    fn check(&self, desc: &RigDesc<'_>) -> Result<(), RigFileError> {
+        desc.validate().map_err(|e| self.core_err(e))
+    }
+
+    fn core_err(&self, e: RigError) -> RigFileError {
+        match e {
+            RigError::Invalid(i) => {
+                let (span, field) = self.spans.locate(&i);
+                self.src.err(&span, field, describe(&i))
+            }
+            other => self.src.err(&(0..0), "rig", format!("{other:?}")),
+        }
+    }
+
+    fn output(&mut self, o: &S<RawOutput>) -> Result<Output, RigFileError> {
+        let raw = o.get_ref();
+        let p = Place::Output;
+        self.spans.entry(p, o.span(), "output".into());
+        self.spans.opt(p, "freq_hz", &raw.freq_hz);
+        self.spans.opt(p, "i2c_addr", &raw.i2c_addr);
+        self.spans.opt(p, "baud", &raw.baud);
+        let need = |v: Option<&S<u32>>, key: &str| -> Result<u32, RigFileError> {
+            v.map(|v| *v.get_ref()).ok_or_else(|| {
+                self.err(
+                    &raw.kind,
+                    &format!("output.{key}"),
+                    format!("output kind {:?} needs {key}", raw.kind.get_ref()),
+                )
+            })
+        };
+        let freq = raw
+            .freq_hz
+            .as_ref()
+            .map(|v| S::new(v.span(), u32::from(*v.get_ref())));
+        let addr = raw
+            .i2c_addr
+            .as_ref()
+            .map(|v| S::new(v.span(), u32::from(*v.get_ref())));
+        let unused = |v: Option<Range<usize>>, key: &str| match v {
+            Some(span) => Err(self.src.err(
+                &span,
+                format!("output.{key}"),
+                format!("not used by output kind {:?}", raw.kind.get_ref()),
+            )),
+            None => Ok(()),
+        };
+        let span = |v: &Option<S<u32>>| v.as_ref().map(S::span);
+        match raw.kind.get_ref().as_str() {
+            "pwm" => {
+                unused(span(&addr), "i2c_addr")?;
+                unused(span(&raw.baud), "baud")?;
+                let f = need(freq.as_ref(), "freq_hz")?;
+                Ok(Output::Pwm {
+                    freq_hz: u16::try_from(f).unwrap_or(u16::MAX),
+                })
+            }
+            "pca9685" => {
+                unused(span(&raw.baud), "baud")?;
+                let f = need(freq.as_ref(), "freq_hz")?;
+                let a = need(addr.as_ref(), "i2c_addr")?;
+                Ok(Output::Pca9685 {
+                    i2c_addr: u8::try_from(a).unwrap_or(u8::MAX),
+                    freq_hz: u16::try_from(f).unwrap_or(u16::MAX),
+                })
+            }
+            "maestro" => {
+                unused(span(&freq), "freq_hz")?;
+                unused(span(&addr), "i2c_addr")?;
+                Ok(Output::Maestro {
+                    baud: need(raw.baud.as_ref(), "baud")?,
+                })
+            }
+            other => Err(self.err(
+                &raw.kind,
+                "output.kind",
+                format!("expected \"pwm\", \"pca9685\" or \"maestro\", found {other:?}"),
+            )),
+        }
+    }
+
+    fn segment_desc(
+        &mut self,
+        i: usize,
+        s: &S<RawSegment>,
+        unit: f32,
+    ) -> Result<SegmentDesc<'static>, RigFileError> {
+        let raw = s.get_ref();
+        let id = u8::try_from(i).unwrap_or(u8::MAX);
+        let p = Place::Segment(id);
+        let path = format!("segment[{i}]");
+        self.spans.entry(p, s.span(), path.clone());
+        self.spans.field(p, "name", &raw.name);
+        self.spans.opt(p, "origin", &raw.origin);
+        self.spans.opt(p, "touch", &raw.touch);
+        self.spans.opt(p, "dofs", &raw.dofs);
+        let parent = match (&raw.parent, i) {
+            (None, 0) => NO_PARENT,
+            (Some(v), 0) => {
+                return Err(self.err(
+                    v,
+                    &format!("{path}.parent"),
+                    "the first segment is the root and has no parent",
+                ));
+            }
+            (None, _) => {
+                return Err(self.src.err(
+                    &s.span(),
+                    format!("{path}.parent"),
+                    "missing parent (only the first segment is the root)",
+                ));
+            }
+            (Some(v), _) => {
+                if *v.get_ref() == *raw.name.get_ref() {
+                    return Err(self.err(
+                        v,
+                        &format!("{path}.parent"),
+                        "a segment cannot be its own parent",
+                    ));
+                }
+                self.segment(v, &format!("{path}.parent")).map_err(|_| {
+                    self.err(
+                        v,
+                        &format!("{path}.parent"),
+                        format!(
+                            "unknown segment {:?} (parents must come before their children)",
+                            v.get_ref()
+                        ),
+                    )
+                })?
+            }
+        };
+        if self.names.iter().any(|n| n == raw.name.get_ref()) {
+            return Err(self.err(
+                &raw.name,
+                &format!("{path}.name"),
+                format!("segment name {:?} is used twice", raw.name.get_ref()),
+            ));
+        }
+        self.names.push(raw.name.get_ref().clone());
+        let mut dofs = List::new();
+        let no_dofs = Vec::new();
+        let raw_dofs = raw.dofs.as_ref().map_or(&no_dofs, |d| d.get_ref());
+        for (k, d) in raw_dofs.iter().enumerate() {
+            let dp = Place::Dof {
+                segment: id,
+                dof: u8::try_from(k).unwrap_or(u8::MAX),
+            };
+            let dpath = format!("{path}.dofs[{k}]");
+            self.spans.entry(dp, d.span(), dpath.clone());
+            self.spans.field(dp, "axis", &d.get_ref().axis);
+            let axis = self.axis(&d.get_ref().axis, &format!("{dpath}.axis"))?;
+            let (span, [min, max]) = self.pair(
+                &d.get_ref().limits,
+                &d.get_ref().limits_deg,
+                &d.span(),
+                &dpath,
+                "limits",
+            )?;
+            self.spans.field(dp, "limits", &span);
+            if dofs.push(DofDesc { axis, min, max }).is_err() {
+                return Err(self.err(d, &format!("{path}.dofs"), "at most 3 degrees of freedom"));
+            }
+        }
+        let scaled = |v: &Option<S<[f32; 3]>>| {
+            v.as_ref()
+                .map_or([0.0; 3], |v| v.get_ref().map(|x| x * unit))
+        };
+        Ok(SegmentDesc {
+            name: "",
+            parent,
+            origin: scaled(&raw.origin),
+            touch: scaled(&raw.touch),
+            dofs,
+        })
+    }
+
+    fn servos(
+        &mut self,
+        raw: &[S<RawServo>],
+        desc: &RigDesc<'_>,
+    ) -> Result<List<ServoDesc, MAX_SERVOS>, RigFileError> {
+        let mut out = List::new();
+        for (i, s) in raw.iter().enumerate() {
+            let v = s.get_ref();
+            let p = Place::Servo(u8::try_from(i).unwrap_or(u8::MAX));
+            let path = format!("servo[{i}]");
+            self.spans.entry(p, s.span(), path.clone());
+            self.spans.field(p, "channel", &v.channel);
+            self.spans.field(p, "joint", &v.joint);
+            self.spans.field(p, "axis", &v.axis);
+            self.spans.field(p, "pulse_us", &v.pulse_us);
+            self.spans.opt(p, "trim_us", &v.trim_us);
+            self.spans.opt(p, "rest_us", &v.rest_us);
+            self.spans.field(p, "max_speed", &v.max_speed);
+            self.spans.field(p, "max_accel", &v.max_accel);
+            let segment = self.segment(&v.joint, &format!("{path}.joint"))?;
+            let seg = desc.segments.as_slice().get(usize::from(segment));
+            let axis = self.axis(&v.axis, &format!("{path}.axis"))?;
+            let dof_index = seg
+                .and_then(|sd| sd.dofs.iter().position(|d| d.axis == axis))
+                .ok_or_else(|| {
+                    self.err(
+                        &v.axis,
+                        &format!("{path}.axis"),
+                        format!(
+                            "segment {:?} has no {:?} degree of freedom",
+                            v.joint.get_ref(),
+                            axis
+                        ),
+                    )
+                })?;
+            let (span, [angle_min, angle_max]) =
+                self.pair(&v.angle, &v.angle_deg, &s.span(), &path, "angle")?;
+            self.spans.field(p, "angle", &span);
+            let [pulse_min_us, pulse_max_us] = *v.pulse_us.get_ref();
+            let mut servo = ServoDesc {
+                channel: *v.channel.get_ref(),
+                segment,
+                dof: u8::try_from(dof_index).unwrap_or(u8::MAX),
+                angle_min,
+                angle_max,
+                pulse_min_us,
+                pulse_max_us,
+                trim_us: v.trim_us.as_ref().map_or(0.0, |t| *t.get_ref()),
+                reversed: v.reversed.unwrap_or(false),
+                rest_us: 0.0,
+                max_speed: *v.max_speed.get_ref(),
+                max_accel: *v.max_accel.get_ref(),
+            };
+            servo.rest_us = match &v.rest_us {
+                Some(r) => *r.get_ref(),
+                None => {
+                    let rest_angle = seg
+                        .and_then(|sd| sd.dofs.as_slice().get(dof_index))
+                        .map_or(0.0, |d| 0f32.clamp(d.min.min(d.max), d.max.max(d.min)));
+                    rest_pulse(&servo.calibration(), rest_angle)
+                }
+            };
+            if out.push(servo).is_err() {
+                return Err(self.src.err(
+                    &s.span(),
+                    path,
+                    format!("more than {} servos", MAX_SERVOS),
+                ));
+            }
+        }
+        Ok(out)
+    }
+
+    fn params(&mut self, raw: &[S<RawParam>]) -> Result<List<ParamMap, MAX_PARAMS>, RigFileError> {
+        let mut out = List::new();
+        for (i, s) in raw.iter().enumerate() {
+            let v = s.get_ref();
+            let p = Place::Param(u8::try_from(i).unwrap_or(u8::MAX));
+            let path = format!("param[{i}]");
+            self.spans.entry(p, s.span(), path.clone());
+            self.spans.field(p, "param", &v.param);
+            self.spans.field(p, "sensor", &v.sensor);
+            self.spans.opt(p, "frame", &v.frame);
+            self.spans.opt(p, "center", &v.center);
+            self.spans.opt(p, "offset", &v.offset);
+            self.spans.opt(p, "scale", &v.scale);
+            let frame = self.ref_frame(&v.frame, &path)?;
+            let measure = self.measure(v, &s.span(), &path)?;
+            let map = ParamMap {
+                param: *v.param.get_ref(),
+                sensor: *v.sensor.get_ref(),
+                frame,
+                measure,
+                offset: v.offset.as_ref().map_or(0.0, |x| *x.get_ref()),
+                scale: v.scale.as_ref().map_or(1.0, |x| *x.get_ref()),
+            };
+            if out.push(map).is_err() {
+                return Err(self.src.err(
+                    &s.span(),
+                    path,
+                    format!("more than {} parameter entries", MAX_PARAMS),
+                ));
+            }
+        }
+        Ok(out)
+    }
+
+    fn measure(
+        &self,
+        v: &RawParam,
+        entry: &Range<usize>,
+        path: &str,
+    ) -> Result<Measure, RigFileError> {
+        let need_axis = || {
+            v.axis
+                .as_ref()
+                .ok_or_else(|| {
+                    self.src.err(
+                        entry,
+                        format!("{path}.axis"),
+                        format!("measure {:?} needs an axis", v.measure.get_ref()),
+                    )
+                })
+                .and_then(|a| self.axis(a, &format!("{path}.axis")))
+        };
+        let need_component = || {
+            v.component.as_ref().ok_or_else(|| {
+                self.src.err(
+                    entry,
+                    format!("{path}.component"),
+                    format!("measure {:?} needs a component", v.measure.get_ref()),
+                )
+            })
+        };
+        let reject = |present: bool, key: &str| {
+            if present {
+                Err(self.src.err(
+                    entry,
+                    format!("{path}.{key}"),
+                    format!("not used by measure {:?}", v.measure.get_ref()),
+                ))
+            } else {
+                Ok(())
+            }
+        };
+        match v.measure.get_ref().as_str() {
+            "position" => {
+                reject(v.axis.is_some(), "axis")?;
+                reject(v.center.is_some(), "center")?;
+                let c = need_component()?;
+                Ok(Measure::Position(
+                    self.axis(c, &format!("{path}.component"))?,
+                ))
+            }
+            "cylindrical" => {
+                let axis = need_axis()?;
+                let c = need_component()?;
+                let component = match c.get_ref().as_str() {
+                    "radius" => Cylinder::Radius,
+                    "angle" => Cylinder::Angle,
+                    "height" => Cylinder::Height,
+                    other => {
+                        return Err(self.err(
+                            c,
+                            &format!("{path}.component"),
+                            format!(
+                                "expected \"radius\", \"angle\" or \"height\", found {other:?}"
+                            ),
+                        ));
+                    }
+                };
+                let center = v.center.as_ref().map_or([0.0; 3], |c| *c.get_ref());
+                Ok(Measure::Cylindrical {
+                    axis,
+                    center,
+                    component,
+                })
+            }
+            "rotation" => {
+                reject(v.component.is_some(), "component")?;
+                reject(v.center.is_some(), "center")?;
+                Ok(Measure::Rotation(need_axis()?))
+            }
+            other => Err(self.err(
+                &v.measure,
+                &format!("{path}.measure"),
+                format!("expected \"position\", \"cylindrical\" or \"rotation\", found {other:?}"),
+            )),
+        }
+    }
+
+    fn goals(&mut self, raw: &[S<RawGoal>]) -> Result<List<GoalMap, MAX_GOALS>, RigFileError> {
+        let mut out = List::new();
+        for (i, s) in raw.iter().enumerate() {
+            let v = s.get_ref();
+            let p = Place::Goal(u8::try_from(i).unwrap_or(u8::MAX));
+            let path = format!("goal[{i}]");
+            self.spans.entry(p, s.span(), path.clone());
+            self.spans.field(p, "segment", &v.segment);
+            self.spans.field(p, "weight", &v.weight);
+            self.spans.opt(p, "point", &v.point);
+            self.spans.opt(p, "target_frame", &v.target_frame);
+            self.spans.opt(p, "sensor", &v.sensor);
+            self.spans.opt(p, "frame", &v.frame);
+            self.spans.opt(p, "offset", &v.offset);
+            self.spans.opt(p, "scale", &v.scale);
+            self.spans
+                .opt(p, "orientation_weight", &v.orientation_weight);
+            self.spans.opt(p, "rotation_offset", &v.rotation_offset);
+            self.spans.opt(p, "target", &v.target);
+            let segment = self.segment(&v.segment, &format!("{path}.segment"))?;
+            let frame = match &v.target_frame {
+                None => None,
+                Some(f) if f.get_ref() == "world" => None,
+                Some(f) => Some(self.segment(f, &format!("{path}.target_frame"))?),
+            };
+            let target = self.goal_source(p, v, &s.span(), &path)?;
+            let map = GoalMap {
+                segment,
+                point: v.point.as_ref().map(|x| *x.get_ref()),
+                weight: *v.weight.get_ref(),
+                frame,
+                target,
+            };
+            if out.push(map).is_err() {
+                return Err(self.src.err(
+                    &s.span(),
+                    path,
+                    format!("more than {} goal entries", MAX_GOALS),
+                ));
+            }
+        }
+        Ok(out)
+    }
+
+    fn goal_source(
+        &mut self,
+        place: Place,
+        v: &RawGoal,
+        entry: &Range<usize>,
+        path: &str,
+    ) -> Result<GoalSource, RigFileError> {
+        let sensor_keys = v.frame.is_some()
+            || v.offset.is_some()
+            || v.scale.is_some()
+            || v.orientation_weight.is_some()
+            || v.rotation_offset.is_some();
+        match (&v.sensor, &v.plane, &v.target) {
+            (Some(sensor), None, None) => Ok(GoalSource::Sensor(SensorGoal {
+                sensor: *sensor.get_ref(),
+                source: self.ref_frame(&v.frame, path)?,
+                offset: v.offset.as_ref().map_or([0.0; 3], |x| *x.get_ref()),
+                scale: v.scale.as_ref().map_or(1.0, |x| *x.get_ref()),
+                orientation_weight: v.orientation_weight.as_ref().map_or(0.0, |x| *x.get_ref()),
+                rotation_offset: v.rotation_offset.as_ref().map_or([1.0, 0.0, 0.0, 0.0], |x| *x.get_ref()),
+            })),
+            (None, Some(plane), None) if !sensor_keys => {
+                let pl = plane.get_ref();
+                self.spans.field(place, "normal", &pl.normal);
+                self.spans.opt(place, "offset", &pl.offset);
+                let above = match pl.side.as_ref().map(|s| (s, s.get_ref().as_str())) {
+                    None | Some((_, "contact")) => false,
+                    Some((_, "above")) => true,
+                    Some((s, other)) => return Err(self.err(s, &format!("{path}.plane.side"), format!("expected \"contact\" or \"above\", found {other:?}"))),
+                };
+                Ok(GoalSource::Plane { normal: *pl.normal.get_ref(), offset: pl.offset.as_ref().map_or(0.0, |o| *o.get_ref()), above })
+            }
+            (None, None, Some(t)) if !sensor_keys => Ok(GoalSource::Point(*t.get_ref())),
+            (None, None, None) => Err(self.src.err(entry, path.to_string(), "needs one of sensor, plane or target")),
+            _ if sensor_keys && v.sensor.is_none() => Err(self.src.err(entry, path.to_string(), "frame, offset, scale, orientation_weight and rotation_offset only apply to a sensor goal")),
+            _ => Err(self.src.err(entry, path.to_string(), "give only one of sensor, plane or target")),
+        }
+    }
+
+    fn retarget(&self, raw: Option<&S<RawRetarget>>) -> Result<Vec<RetargetJoint>, RigFileError> {
+        let Some(raw) = raw else {
+            return Ok(Vec::new());
+        };
+        let r = raw.get_ref();
+        let mut out: Vec<RetargetJoint> = Vec::new();
+        if r.identity {
+            for (i, n) in self.names.iter().enumerate() {
+                out.push(RetargetJoint {
+                    mocap: n.clone(),
+                    segment: u8::try_from(i).unwrap_or(u8::MAX),
+                    rotation_offset: [1.0, 0.0, 0.0, 0.0],
+                });
+            }
+        }
+        for (i, j) in r.joint.iter().enumerate() {
+            let v = j.get_ref();
+            let path = format!("retarget.joint[{i}]");
+            let segment = self.segment(&v.segment, &format!("{path}.segment"))?;
+            let rotation_offset = match &v.rotation_offset {
+                None => [1.0, 0.0, 0.0, 0.0],
+                Some(q) => {
+                    let a = *q.get_ref();
+                    let n2: f64 = a.iter().map(|x| x * x).sum();
+                    if !n2.is_finite() || (n2 - 1.0).abs() > 1e-3 {
+                        return Err(self.err(
+                            q,
+                            &format!("{path}.rotation_offset"),
+                            "must be a finite unit quaternion [w, x, y, z]",
+                        ));
+                    }
+                    a
+                }
+            };
+            if v.mocap.get_ref().is_empty() {
+                return Err(self.err(&v.mocap, &format!("{path}.mocap"), "must not be empty"));
+            }
+            let entry = RetargetJoint {
+                mocap: v.mocap.get_ref().clone(),
+                segment,
+                rotation_offset,
+            };
+            match out.iter_mut().find(|e| e.segment == segment) {
+                Some(e) => *e = entry,
+                None => out.push(entry),
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// The pulse of a joint angle without trim clamping surprises: the
+/// calibration's own mapping.
+fn rest_pulse(cal: &Calibration, angle: f32) -> f32 {
+    cal.pulse_us(angle)
+}
