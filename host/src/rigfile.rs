@@ -406,12 +406,12 @@ impl Source<'_> {
             }
             if offset < pos || pos >= self.text.len() {
                 let col = offset.saturating_sub(start);
-                let key = line
-                    .get(..col.min(line.len()))
-                    .and_then(|before| before.split('=').next())
-                    .filter(|_| line.contains('=') && !t.starts_with('['))
-                    .map(|k| k.trim().trim_matches('"').to_string())
-                    .filter(|k| !k.is_empty() && !k.contains(['{', '[', ',']));
+                let before = line.get(..col.min(line.len())).unwrap_or("");
+                let key = if t.starts_with('[') {
+                    None
+                } else {
+                    key_before(before)
+                };
                 return match (table.is_empty(), key) {
                     (true, Some(k)) => k,
                     (false, Some(k)) => format!("{table}.{k}"),
@@ -456,6 +456,32 @@ impl Source<'_> {
             field = format!("{field}.{name}");
         }
         self.err(&span, field, message)
+    }
+}
+
+/// The key a value at the end of `before` belongs to: the line's own key,
+/// then (for a value inside an inline table) the innermost key, joined by a
+/// dot (`dofs.limits_deg`).
+fn key_before(before: &str) -> Option<String> {
+    let pieces: Vec<&str> = before.split('=').collect();
+    let ident = |piece: &str| -> Option<String> {
+        let k = piece
+            .trim_end()
+            .rsplit(|c: char| c.is_whitespace() || matches!(c, '{' | ',' | '['))
+            .next()?
+            .trim_matches('"');
+        (!k.is_empty()).then(|| k.to_string())
+    };
+    let keys: Vec<String> = pieces
+        .iter()
+        .take(pieces.len().saturating_sub(1))
+        .filter_map(|p| ident(p))
+        .collect();
+    let first_is_key = !before.trim_start().starts_with(['{', '[']);
+    match (keys.first(), keys.last()) {
+        (Some(f), Some(l)) if f != l && first_is_key => Some(format!("{f}.{l}")),
+        (_, Some(l)) => Some(l.clone()),
+        _ => None,
     }
 }
 
