@@ -534,7 +534,7 @@ impl Eye {
         let el = camera.elevation_deg.clamp(-85.0, 85.0).to_radians();
         let half_fov = (camera.fov_deg.clamp(5.0, 150.0) / 2.0).to_radians();
         let towards_eye = DVec3::new(az.sin() * el.cos(), el.sin(), az.cos() * el.cos());
-        let distance = radius.max(0.1) / half_fov.sin() * 1.15;
+        let distance = radius.max(0.1) / half_fov.sin() * 1.6;
         let forward = -towards_eye;
         let right = forward.cross(DVec3::Y).normalize();
         Eye {
@@ -586,7 +586,7 @@ impl Bounds {
     /// Half the side of the floor grid, centred under the figure.
     fn floor_half(&self) -> f64 {
         let d = self.max - self.min;
-        d.x.max(d.z) * 0.5 + 0.15
+        d.x.max(d.z) * 0.5 + 0.1
     }
 
     fn floor_step(&self) -> f64 {
@@ -894,10 +894,11 @@ fn draw_guides<DB: DrawingBackend>(
         // At the grid's far left corner, so all three axes lie over the grid.
         let (x0, z0, span, step) = b.floor_square();
         let corner = DVec3::new(x0 - span, b.floor, z0 - span);
+        let len = step * 0.6;
         for (name, axis) in [("x", DVec3::X), ("y", DVec3::Y), ("z", DVec3::Z)] {
-            let end = corner + axis * step;
+            let end = corner + axis * len;
             line(panel, proj, (corner, end), stroke)?;
-            if let Some(p) = proj.px(end + axis * step * 0.25) {
+            if let Some(p) = proj.px(end + axis * len * 0.3) {
                 text(panel, name, p, 14.0 * k, GUIDE, CENTRE)?;
             }
         }
@@ -1412,12 +1413,12 @@ mod tests {
             max: DVec3::new(0.3, 1.8, 0.1),
             floor: 0.0,
         };
-        // Half side 0.3 + 0.15 = 0.45, step nice(0.15) = 0.2, 3 steps each way.
+        // Half side 0.3 + 0.1 = 0.4, step nice(0.4 / 3) = 0.2, 2 steps each way.
         let (x0, z0, span, step) = b.floor_square();
         assert_eq!((x0, z0, step), (0.0, 0.0, 0.2));
-        assert!((span - 0.6).abs() < 1e-12);
+        assert!((span - 0.4).abs() < 1e-12);
         let grid = b.floor_grid();
-        assert_eq!(grid.len(), 2 * 7);
+        assert_eq!(grid.len(), 2 * 5);
         assert!(grid.iter().all(|(p, q)| p.y == 0.0 && q.y == 0.0));
     }
 

@@ -203,6 +203,71 @@ fn render_draws_a_pose_and_its_goals() {
 }
 
 #[test]
+fn render_takes_the_skeleton_from_a_rig_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = concat!(env!("CARGO_MANIFEST_DIR"), "/../rigs/humanoid16.toml");
+    let out = dir.path().join("rig.svg");
+    let said = ok(&["render", "--rig", rig, "-o", s(&out)]);
+    // At least a bone from every parent to its child.
+    let segments = std::fs::read_to_string(rig)
+        .unwrap()
+        .lines()
+        .filter(|l| l.trim() == "[[segment]]")
+        .count();
+    let bones: usize = said
+        .split_whitespace()
+        .zip(said.split_whitespace().skip(1))
+        .find(|(_, w)| w.starts_with("bones"))
+        .and_then(|(n, _)| n.parse().ok())
+        .unwrap();
+    assert!(segments > 10 && bones >= segments - 1, "{said}");
+    let svg = std::fs::read_to_string(&out).unwrap();
+    let lines = polylines(&svg);
+    assert!(lines.iter().any(|(c, _)| c == BLUE) && lines.iter().any(|(c, _)| c == RED));
+    if font_available() {
+        assert!(svg.contains("humanoid16 rest pose"));
+    }
+    let err = fails(&["render", "--rig", "no/such/rig.toml", "-o", s(&out)]);
+    assert!(err.contains("no/such/rig.toml"), "{err}");
+    let err = fails(&["render", "--rig", rig, "--body", "cmu", "-o", s(&out)]);
+    assert!(err.contains("cannot be used with"), "{err}");
+}
+
+#[test]
+fn render_reads_the_pose_from_standard_input() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("stdin.png");
+    let body = marionette_core::body::tempus::BODY;
+    let world = marionette_host::cmd::render::rest_pose(&body).unwrap();
+    let segments: Vec<serde_json::Value> = body
+        .segments
+        .iter()
+        .zip(&world)
+        .map(|(seg, (p, q))| {
+            serde_json::json!({"name": seg.name, "position": p.to_array(),
+                               "rotation": [q.w, q.x, q.y, q.z]})
+        })
+        .collect();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_marionette"))
+        .args(["render", "--pose", "-", "-o", s(&out)])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let json = serde_json::json!({ "segments": segments, "duration": null });
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(json.to_string().as_bytes())
+        .unwrap();
+    let done = child.wait_with_output().unwrap();
+    assert!(done.status.success());
+    assert_eq!(png_size(&out), (1200, 1200));
+}
+
+#[test]
 fn render_refuses_bad_input() {
     let dir = tempfile::tempdir().unwrap();
     let err = fails(&["render", "-o", s(&dir.path().join("x.jpg"))]);

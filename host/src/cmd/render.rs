@@ -1,5 +1,8 @@
 //! `marionette render`: a pose and its goals in four views (POSIT, Figure 2).
 //!
+//! The skeleton comes from a rig file (`--rig`) or a body shipped with the
+//! core (`--body tempus|cmu`, the default tempus).
+//!
 //! The pose is a JSON file of world-space segment placements, the form
 //! `marionette synth`/`solve` print:
 //!
@@ -9,21 +12,25 @@
 //!
 //! `position` is the segment's joint origin (metres), `rotation` its world
 //! orientation `[w, x, y, z]`. Every segment of the body must appear once, in
-//! any order; other fields are ignored. Without `--pose` the body's rest pose
-//! is drawn (core forward kinematics, lifted so the lowest point is on the
-//! floor).
+//! any order; other fields are ignored. Without `--pose` the rest pose is
+//! drawn: a rig's own (root at its `root_position`, as `marionette solve`
+//! starts from), or a shipped body's through core forward kinematics, lifted
+//! so that its lowest point is on the floor.
 //!
 //! Goals are a JSON list (bare, or as `{"goals": [...]}`) of
 //! `{"segment": "left_hand", "target": [x, y, z], "weight": 10}`; `segment`
 //! may be a name or an index, `weight` defaults to 1, and an optional
 //! `"point": [x, y, z]` (segment frame) replaces the touch point. The
-//! drawing joins the pulled point to the target.
+//! drawing joins the pulled point to the target. This is the goal list of
+//! `marionette solve`'s input (its other keys are ignored).
 
 use super::CmdError;
 use crate::render::{self, Camera, Figure, Mark, RenderOptions};
+use crate::rigfile;
 use glam::{DQuat, DVec3};
 use marionette_core::body::{self, Angles, Body};
 use marionette_core::pose::{LocalPose, MAX_SEGMENTS, Pose};
+use marionette_core::rig::Rig;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -57,11 +64,16 @@ impl BodyName {
 /// Arguments of `marionette render`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The body the pose belongs to.
+    /// The rig file whose skeleton the pose belongs to (a path, or a name
+    /// under `rigs/`); instead of `--body`.
+    #[arg(long, conflicts_with = "body")]
+    pub rig: Option<PathBuf>,
+    /// The shipped body the pose belongs to (without `--rig`).
     #[arg(long, value_enum, default_value = "tempus")]
     pub body: BodyName,
-    /// World pose JSON (`{"segments":[{"name","position","rotation"}]}`);
-    /// the rest pose if absent.
+    /// World pose JSON (`{"segments":[{"name","position","rotation"}]}`,
+    /// as `synth` prints it; `-` reads standard input); the rest pose if
+    /// absent.
     #[arg(long)]
     pub pose: Option<PathBuf>,
     /// Goals JSON (`[{"segment","target","weight"}]`).
@@ -170,9 +182,14 @@ pub fn rest_pose(body: &Body<'_>) -> Result<Vec<(DVec3, DQuat)>, CmdError> {
     Ok(world)
 }
 
-/// Reads a pose file and orders its placements as the body's segments.
+/// Reads a pose file (`-`: standard input) and orders its placements as the
+/// body's segments.
 pub fn read_pose(body: &Body<'_>, path: &Path) -> Result<Vec<(DVec3, DQuat)>, CmdError> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let text = if path == Path::new("-") {
+        std::io::read_to_string(std::io::stdin()).map_err(|e| format!("standard input: {e}"))?
+    } else {
+        std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?
+    };
     let file: PoseFile =
         serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
     world_from_file(body, &file).map_err(|e| format!("{}: {e}", path.display()).into())
@@ -267,18 +284,48 @@ pub fn mark(body: &Body<'_>, world: &[(DVec3, DQuat)], g: &GoalEntry) -> Result<
 
 /// Builds the figure the arguments describe.
 pub fn figure(args: &Args) -> Result<Figure, CmdError> {
-    let body = args.body.body();
+    match &args.rig {
+        Some(arg) => {
+            let path = rigfile::resolve(arg);
+            let file = rigfile::load(&path)?;
+            let desc = file.desc();
+            let rig = Rig::from_desc(&desc).map_err(|e| format!("{}: {e:?}", path.display()))?;
+            let body = rig.body();
+            let rest = rig.rest_pose();
+            let rest: Vec<(DVec3, DQuat)> = rest
+                .positions()
+                .iter()
+                .zip(rest.rotations())
+                .take(body.len())
+                .map(|(p, q)| (p.as_dvec3(), q.as_dquat()))
+                .collect();
+            figure_of(&body, file.name(), rest, args)
+        }
+        None => {
+            let body = args.body.body();
+            figure_of(&body, args.body.name(), rest_pose(&body)?, args)
+        }
+    }
+}
+
+/// The figure of `body` in the `--pose` (or `rest`) with the `--goals`.
+fn figure_of(
+    body: &Body<'_>,
+    body_name: &str,
+    rest: Vec<(DVec3, DQuat)>,
+    args: &Args,
+) -> Result<Figure, CmdError> {
     let world = match &args.pose {
-        Some(path) => read_pose(&body, path)?,
-        None => rest_pose(&body)?,
+        Some(path) => read_pose(body, path)?,
+        None => rest,
     };
     let title = args.title.clone().unwrap_or_else(|| match &args.pose {
-        Some(p) => format!("{} ({})", p.display(), args.body.name()),
-        None => format!("{} rest pose", args.body.name()),
+        Some(p) => format!("{} ({body_name})", p.display()),
+        None => format!("{body_name} rest pose"),
     });
-    let mut fig = Figure::from_world(&body, &world, title)?;
+    let mut fig = Figure::from_world(body, &world, title)?;
     if let Some(path) = &args.goals {
-        fig.goals = read_goals(&body, &world, path)?;
+        fig.goals = read_goals(body, &world, path)?;
     }
     Ok(fig)
 }
