@@ -1,0 +1,361 @@
+//! Measurements of a built table: quantization error against the
+//! unquantized table, and held-out error on real data.
+//!
+//! # Quantization
+//!
+//! [`quantization`] decodes every stored segment sample of the blob with the
+//! core reader and compares it with the `f32` sample given to the writer
+//! (position per coordinate, rotation as the angle of the relative
+//! rotation, in `f64`), and synthesizes at 2,000 pseudo-random parameter
+//! points (a fixed LCG) from both the blob and the unquantized samples with
+//! the same core grid, comparing every segment of the two poses.
+//!
+//! # Hold-out
+//!
+//! [`holdout`] removes one clip (group) from the examples, builds the table
+//! from the rest exactly as `marionette build` does (method chosen by
+//! cross-validation on the remaining clips), writes and parses the blob, and
+//! synthesizes with the core at each held-out example's parameters. It
+//! reports, over the held-out examples, the hand (probe segment) position
+//! error and the mean per-joint position error, both in the build frame.
+//! For a grid table on a rig of at most 64 segments it then solves the hand
+//! goal with the core's default solver ([`marionette_core::solve`], whole-tree
+//! damped least squares, root fixed) starting from the synthesized pose, and
+//! reports both errors again.
+
+use std::f32::consts::PI;
+
+use glam::{Quat, Vec3};
+use marionette_core::body::{Angles, Axis, Body, Dof, Joint, Segment};
+use marionette_core::goal::{Goal, GoalSet};
+use marionette_core::grid::{Adjust, SliceSamples};
+use marionette_core::pose::{self, LocalPose, Pose};
+use marionette_core::solve::{self, Solver};
+use marionette_core::table::{Kind, Table, Wrap};
+use serde::Serialize;
+
+use super::error::BuildError;
+use super::resample::{self, Value, compare, median};
+use super::retarget::{CAP, Rig};
+use super::spec::Spec;
+use super::{Dataset, Layout, Progress, query};
+use crate::blob::TableSpec;
+
+/// Measured quantization error.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Quantization {
+    /// Largest per-coordinate position error of a stored sample, metres.
+    pub max_position: f64,
+    /// Largest rotation error of a stored sample, radians.
+    pub max_rotation: f64,
+    /// The header's stated position bound, metres.
+    pub position_bound: f64,
+    /// The header's stated rotation bound, radians.
+    pub rotation_bound: f64,
+    /// Parameter points synthesized from both tables.
+    pub synth_points: usize,
+    /// Largest per-coordinate position difference of synthesized poses, m.
+    pub synth_max_position: f64,
+    /// Largest rotation difference of synthesized poses, radians.
+    pub synth_max_rotation: f64,
+}
+
+fn angle(a: Quat, b: Quat) -> f64 {
+    resample::rotation_angle(a.as_dquat().normalize(), b.as_dquat().normalize())
+}
+
+fn readback(e: impl std::fmt::Debug) -> BuildError {
+    BuildError::Readback(format!("{e:?}"))
+}
+
+/// Measures the blob against the unquantized table (see the module doc).
+pub fn quantization(spec: &TableSpec, blob: &[u8]) -> Result<Quantization, BuildError> {
+    let table = Table::parse(blob).map_err(readback)?;
+    let mut q = Quantization {
+        position_bound: f64::from(table.header().position_bound),
+        rotation_bound: f64::from(table.header().rotation_bound),
+        ..Quantization::default()
+    };
+    for (i, sample) in spec.samples.iter().enumerate() {
+        for (s, &(p, r)) in sample.iter().enumerate() {
+            let (dp, dr) = table
+                .sample(i, s)
+                .ok_or_else(|| readback("missing sample"))?;
+            q.max_position = q.max_position.max(f64::from((dp - p).abs().max_element()));
+            q.max_rotation = q.max_rotation.max(angle(dr, r));
+        }
+    }
+    let segments = spec.segment_names.len();
+    let positions: Vec<Vec3> = spec.samples.iter().flatten().map(|s| s.0).collect();
+    let rotations: Vec<Quat> = spec
+        .samples
+        .iter()
+        .flatten()
+        .map(|s| s.1.normalize())
+        .collect();
+    let exact = SliceSamples::new(segments, &positions, &rotations)
+        .ok_or_else(|| readback("sample shape"))?;
+    let grid = table.grid().map_err(readback)?;
+    let mut rng = Lcg(0x5eed);
+    let mut a = Box::new(Pose::<CAP>::default());
+    let mut b = Box::new(Pose::<CAP>::default());
+    for _ in 0..2000 {
+        let params: Vec<f32> = table
+            .axes()
+            .iter()
+            .map(|ax| {
+                let span = match ax.wrap {
+                    Wrap::Bounded => f32::from(ax.count - 1) * ax.step,
+                    Wrap::Cyclic { period } => period,
+                };
+                ax.min + rng.unit() * span
+            })
+            .collect();
+        let query = grid.query(&params).map_err(readback)?;
+        query.pose(&table, &mut a).map_err(readback)?;
+        query.pose(&exact, &mut b).map_err(readback)?;
+        for ((pa, ra), (pb, rb)) in a
+            .positions()
+            .iter()
+            .zip(a.rotations())
+            .zip(b.positions().iter().zip(b.rotations()))
+        {
+            q.synth_max_position = q
+                .synth_max_position
+                .max(f64::from((*pa - *pb).abs().max_element()));
+            q.synth_max_rotation = q.synth_max_rotation.max(angle(*ra, *rb));
+        }
+        q.synth_points += 1;
+    }
+    Ok(q)
+}
+
+/// A tiny deterministic generator (64-bit LCG, Knuth's constants).
+struct Lcg(u64);
+
+impl Lcg {
+    fn unit(&mut self) -> f32 {
+        self.0 = self
+            .0
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// Errors after solving the hand goal.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Solved {
+    /// Median hand error, metres.
+    pub median_probe: f64,
+    /// Mean over examples of the mean per-joint position error, metres.
+    pub mean_joint: f64,
+    /// Examples whose solve the core refused.
+    pub failures: usize,
+}
+
+/// The result of one hold-out.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Holdout {
+    /// The held-out clip.
+    pub clip: String,
+    /// Held-out examples evaluated.
+    pub examples: usize,
+    /// The method the build chose without this clip.
+    pub method: String,
+    /// Median hand (probe) position error, metres.
+    pub median_probe: Option<f64>,
+    /// Mean over examples of the mean per-joint position error, metres.
+    pub mean_joint: f64,
+    /// Median over examples of the mean per-joint position error, metres.
+    pub median_joint: f64,
+    /// Mean per-joint rotation error, radians.
+    pub mean_rotation: f64,
+    /// Examples whose parameters fell in an invalid cell (projected).
+    pub projected: usize,
+    /// Examples whose parameters were outside the axes (clamped).
+    pub clamped: usize,
+    /// Mean relative error of the interpolated durations (clip tables).
+    pub duration_error: Option<f64>,
+    /// After solving the hand goal (grid tables).
+    pub solved: Option<Solved>,
+}
+
+/// Leaves group `group` out, builds from the rest, and measures (see the
+/// module doc).
+pub fn holdout(
+    spec: &Spec,
+    data: &Dataset,
+    group: usize,
+    progress: &Progress,
+) -> Result<Holdout, BuildError> {
+    let built = super::build(spec, data, Some(group), progress)?;
+    let table = Table::parse(&built.blob).map_err(readback)?;
+    let held: Vec<&resample::Record> = data.records.iter().filter(|r| r.group == group).collect();
+    let solver = data
+        .rig
+        .as_ref()
+        .zip(data.probe_segment)
+        .filter(|_| data.layout == Layout::Grid);
+    let body = solver.and_then(|(rig, _)| RigBody::new(rig));
+    let mut probes = Vec::new();
+    let mut joints = Vec::new();
+    let mut rotations = Vec::new();
+    let mut durations = Vec::new();
+    let (mut projected, mut clamped) = (0, 0);
+    let (mut solved_probe, mut solved_joint, mut failures) = (Vec::new(), Vec::new(), 0);
+    progress.stage("synthesizing held-out examples", held.len());
+    for r in &held {
+        let params: Vec<f32> = r.params.iter().map(|&p| p as f32).collect();
+        let (frames, synth) =
+            query::frames(&table, &params).map_err(|e| BuildError::Data(e.to_string()))?;
+        match synth.adjust {
+            Adjust::Projected => projected += 1,
+            Adjust::Clamped => clamped += 1,
+            Adjust::None => {}
+        }
+        let pred = Value {
+            poses: frames
+                .iter()
+                .flatten()
+                .map(|(p, q)| (p.as_dvec3(), q.as_dquat()))
+                .collect(),
+            scalars: synth.durations.iter().map(|&d| f64::from(d)).collect(),
+        };
+        let e = compare(&pred, &r.value, data.probe);
+        joints.push(e.mean_position);
+        rotations.push(e.mean_rotation);
+        probes.extend(e.probe);
+        if !r.value.scalars.is_empty() {
+            let rel: f64 = pred
+                .scalars
+                .iter()
+                .zip(&r.value.scalars)
+                .map(|(p, t)| ((p - t) / t).abs())
+                .sum();
+            durations.push(rel / r.value.scalars.len() as f64);
+        }
+        if let (Some(body), Some((_, seg))) = (&body, solver) {
+            match body.solve(&frames[0], seg, r.value.poses[seg].0.as_vec3()) {
+                Some(solved) => {
+                    let e = compare(&solved, &r.value, Some(seg));
+                    solved_joint.push(e.mean_position);
+                    solved_probe.extend(e.probe);
+                }
+                None => failures += 1,
+            }
+        }
+        progress.tick();
+    }
+    Ok(Holdout {
+        clip: data.groups.get(group).cloned().unwrap_or_default(),
+        examples: held.len(),
+        method: built.report.method.to_string(),
+        median_probe: median(&mut probes),
+        mean_joint: resample::mean(&joints),
+        median_joint: median(&mut joints).unwrap_or(f64::NAN),
+        mean_rotation: resample::mean(&rotations),
+        projected,
+        clamped,
+        duration_error: (!durations.is_empty()).then(|| resample::mean(&durations)),
+        solved: body.map(|_| Solved {
+            median_probe: median(&mut solved_probe).unwrap_or(f64::NAN),
+            mean_joint: resample::mean(&solved_joint),
+            failures,
+        }),
+    })
+}
+
+/// The rig as a core body for the solver. From a rig file: the file's
+/// joints, limits and touch points (through the core's runtime rig).
+/// Without one: every joint a 3-DOF ball (Z, Y, X, ±180°).
+struct RigBody {
+    names: Vec<String>,
+    parents: Vec<u8>,
+    offsets: Vec<Vec3>,
+    file: Option<Box<crate::rigfile::RigFile>>,
+}
+
+impl RigBody {
+    fn new(rig: &Rig) -> Option<Self> {
+        (rig.names.len() <= marionette_core::pose::MAX_SEGMENTS).then(|| Self {
+            names: rig.names.clone(),
+            parents: rig.parents.clone(),
+            offsets: rig.offsets.clone(),
+            file: rig.file.clone(),
+        })
+    }
+
+    /// Solves `segment`'s origin to `target` from the synthesized `pose`.
+    fn solve(&self, pose: &[(Vec3, Quat)], segment: usize, target: Vec3) -> Option<Value> {
+        if let Some(file) = &self.file {
+            let desc = file.desc();
+            let rig = marionette_core::rig::Rig::from_desc(&desc).ok()?;
+            return solve_body(&rig.body(), pose, segment, target);
+        }
+        let ball = Joint::three(
+            Dof::new(Axis::Z, -PI, PI),
+            Dof::new(Axis::Y, -PI, PI),
+            Dof::new(Axis::X, -PI, PI),
+        );
+        let segments: Vec<Segment<'_>> = self
+            .names
+            .iter()
+            .zip(&self.parents)
+            .zip(&self.offsets)
+            .enumerate()
+            .map(|(i, ((name, &parent), &origin))| Segment {
+                name,
+                parent,
+                origin,
+                joint: if i == 0 { Joint::FIXED } else { ball },
+                touch: Vec3::ZERO,
+            })
+            .collect();
+        let body = Body {
+            segments: &segments,
+            parents: &self.parents,
+            offsets: &self.offsets,
+        };
+        solve_body(&body, pose, segment, target)
+    }
+}
+
+/// The core's default solve of one point goal (the segment's origin at
+/// `target`), warm-started from `pose` projected onto the body's joints.
+fn solve_body(
+    body: &Body<'_>,
+    pose: &[(Vec3, Quat)],
+    segment: usize,
+    target: Vec3,
+) -> Option<Value> {
+    let mut p = Pose::<64>::new(pose.len()).ok()?;
+    for (i, (pos, rot)) in pose.iter().enumerate() {
+        p.set(i, *pos, *rot).ok()?;
+    }
+    let mut local = LocalPose::<64>::default();
+    pose::to_local(&body.hierarchy(), &p, &mut local).ok()?;
+    let mut angles = Angles::<64>::from_local(body, &local).ok()?;
+    let mut goals = GoalSet::<1>::new();
+    let goal = Goal::reach(u8::try_from(segment).ok()?, target, 1.0).at(Vec3::ZERO);
+    goals.push(goal).ok()?;
+    solve::solve(&Solver::DEFAULT, body, &goals, &mut angles, &mut p).ok()?;
+    Some(Value {
+        poses: p
+            .positions()
+            .iter()
+            .zip(p.rotations())
+            .map(|(a, b)| (a.as_dvec3(), b.as_dquat()))
+            .collect(),
+        scalars: Vec::new(),
+    })
+}
+
+/// The table kind as a word.
+#[must_use]
+pub fn kind_name(kind: Kind) -> &'static str {
+    match kind {
+        Kind::Grid => "grid",
+        Kind::Clips { .. } => "clips",
+    }
+}

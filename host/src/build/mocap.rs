@@ -1,0 +1,414 @@
+//! Mocap clips → retargeted, normalized examples.
+//!
+//! Each clip is imported ([`crate::import`]), every frame is put through the
+//! core's forward kinematics on the imported skeleton and retargeted to the
+//! rig ([`super::retarget`]). Then:
+//!
+//! - **Grid tables**: every `every`-th frame of the chosen ranges is one
+//!   example. With `frame = "heading"` each example is expressed in its own
+//!   heading frame: origin on the floor (y = 0) below the root, turned about
+//!   Y so that the root's forward axis points along +Z. Parameters measured
+//!   from a segment (the hand) are its position in that frame, so "hand at
+//!   (x, y, z)" means "x to the figure's left, y above the floor, z in front".
+//! - **Motion tables**: each clip is cut at `cut = [first, ..., last]` into
+//!   phases, expressed in the heading frame of its first frame, and each
+//!   phase is time-resampled with [`marionette_core::clip::resample`] to the
+//!   common frame count (W&H Fig. 6). A looping clip (one phase, `last` one
+//!   period after `first`) is first made "in place": the frame's +Z is the
+//!   direction of travel from `first` to `last`, and the root's net travel is
+//!   removed linearly in time from every position; then
+//!   [`marionette_core::clip::seam_blend`] spreads the remaining mismatch
+//!   over the ends. Each phase's duration is its frame span times the frame
+//!   time. Parameters: a segment's position at the first phase boundary
+//!   (`cut[1]`, the reach pose) or at `first` for a loop; `speed` = the
+//!   root's net horizontal travel divided by the clip's duration.
+
+use glam::{DQuat, DVec3, Quat, Vec3};
+use marionette_core::clip::{self, Span};
+use marionette_core::grid::SliceSamples;
+use marionette_core::pose::{self, Pose};
+
+use super::Seg;
+use super::error::{BuildError, InputError};
+use super::resample::{Record, Value};
+use super::retarget::{CAP, Rig};
+use super::spec::{AxisSpec, ClipSpec, FrameKind, Measure, MocapSpec, MotionSpec, Spec};
+use crate::import::{self, EndSites, Motion};
+
+/// One imported, retargeted clip in the mocap's world frame.
+#[derive(Debug, Clone)]
+pub struct Clip {
+    /// Name (file stem).
+    pub name: String,
+    /// Seconds per frame.
+    pub frame_time: f64,
+    /// Rig poses per frame.
+    pub poses: Vec<Vec<Seg>>,
+}
+
+/// The rig and the clips.
+#[derive(Debug, Clone)]
+pub struct Mocap {
+    /// The rig.
+    pub rig: Rig,
+    /// The clips, in spec order.
+    pub clips: Vec<Clip>,
+}
+
+/// Imports and retargets every clip of the spec.
+pub fn load(spec: &Spec, m: &MocapSpec, tick: &dyn Fn(&str)) -> Result<Mocap, BuildError> {
+    let mut rig: Option<Rig> = None;
+    let mut first_names: Vec<String> = Vec::new();
+    let mut clips = Vec::with_capacity(m.clips.len());
+    for (i, c) in m.clips.iter().enumerate() {
+        tick(&c.name);
+        let motion = import_clip(spec, m, c, i)?;
+        let sk = motion.core_skeleton(if m.end_sites {
+            EndSites::Keep
+        } else {
+            EndSites::Drop
+        })?;
+        if rig.is_none() {
+            rig = Some(match &spec.rig.file {
+                Some(path) => {
+                    let file =
+                        crate::rigfile::load(path).map_err(|e| BuildError::Data(e.to_string()))?;
+                    Rig::from_rigfile(file, &sk, &spec.source, spec.rig.line)?
+                }
+                None => Rig::from_skeleton(&sk, &spec.rig, &spec.source)?,
+            });
+            first_names.clone_from(&sk.names);
+        } else if sk.names != first_names {
+            let problem =
+                "the skeleton differs from the first clip's (every clip needs the same joints)";
+            return Err(spec
+                .source
+                .error_line(c.line, &format!("clip[{i}].file"), problem)
+                .into());
+        }
+        let Some(rig) = rig.as_ref() else { continue };
+        let frame_time = m.fps.map_or(motion.frame_time, |f| 1.0 / f);
+        let poses = retarget_all(&motion, &sk, rig)?;
+        clips.push(Clip {
+            name: c.name.clone(),
+            frame_time,
+            poses,
+        });
+    }
+    let rig = rig.ok_or_else(|| BuildError::Data("no clip".to_owned()))?;
+    Ok(Mocap { rig, clips })
+}
+
+fn import_clip(spec: &Spec, m: &MocapSpec, c: &ClipSpec, i: usize) -> Result<Motion, BuildError> {
+    let ext = c
+        .file
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let field = format!("clip[{i}].file");
+    match ext.as_deref() {
+        Some("amc") => {
+            let Some(asf) = &m.skeleton else {
+                let problem = "an AMC clip needs `skeleton = \"file.asf\"` in [mocap]";
+                return Err(spec.source.error_line(c.line, &field, problem).into());
+            };
+            let frame_time = m.fps.map_or(import::amc::HDM05_FRAME_TIME, |f| 1.0 / f);
+            Ok(import::amc::read_motion(asf, &c.file, frame_time)?)
+        }
+        Some("bvh") => Ok(import::bvh::read_motion(&c.file, m.scale)?),
+        _ => {
+            let problem = format!("{}: expected a .bvh or .amc file", c.file.display());
+            Err(spec.source.error_line(c.line, &field, problem).into())
+        }
+    }
+}
+
+fn pose_error(file: &str, e: impl std::fmt::Debug) -> BuildError {
+    BuildError::Pose {
+        file: file.to_owned(),
+        problem: format!("{e:?}"),
+    }
+}
+
+/// Every frame, forward kinematics on the mocap skeleton, then retargeted.
+fn retarget_all(
+    motion: &Motion,
+    sk: &import::CoreSkeleton,
+    rig: &Rig,
+) -> Result<Vec<Vec<Seg>>, BuildError> {
+    let h = sk.hierarchy();
+    let mut world = Pose::<CAP>::default();
+    let mut out = Pose::<CAP>::default();
+    (0..motion.frames.len())
+        .map(|f| {
+            let local = motion.local_pose::<CAP>(sk, f)?;
+            pose::forward(&h, &local, &mut world).map_err(|e| pose_error(&motion.source, e))?;
+            rig.retarget(&world, &mut out)
+                .map_err(|e| pose_error(&motion.source, e))?;
+            Ok(to_f64(&out))
+        })
+        .collect()
+}
+
+fn to_f64(p: &Pose<CAP>) -> Vec<Seg> {
+    p.positions()
+        .iter()
+        .zip(p.rotations())
+        .map(|(p, q)| (p.as_dvec3(), q.as_dquat().normalize()))
+        .collect()
+}
+
+/// A rigid frame change `x ↦ rot · (x − origin)`.
+#[derive(Debug, Clone, Copy)]
+pub struct Frame {
+    origin: DVec3,
+    rot: DQuat,
+}
+
+impl Frame {
+    /// The identity.
+    pub const WORLD: Frame = Frame {
+        origin: DVec3::ZERO,
+        rot: DQuat::IDENTITY,
+    };
+
+    /// The heading frame of a root placement (see the module doc), or of an
+    /// explicit horizontal `direction` taken as +Z.
+    #[must_use]
+    pub fn heading(root: &Seg, forward: DVec3, direction: Option<DVec3>) -> Frame {
+        let f = direction.unwrap_or(root.1 * forward);
+        let yaw = f.x.atan2(f.z);
+        Frame {
+            origin: DVec3::new(root.0.x, 0.0, root.0.z),
+            rot: DQuat::from_rotation_y(-yaw),
+        }
+    }
+
+    /// A pose in this frame.
+    #[must_use]
+    pub fn apply(&self, pose: &[Seg]) -> Vec<Seg> {
+        pose.iter()
+            .map(|&(p, q)| (self.rot * (p - self.origin), (self.rot * q).normalize()))
+            .collect()
+    }
+}
+
+/// Checks the position measures against the rig; returns the segment per axis.
+pub fn measure_segments(spec: &Spec, rig: &Rig) -> Result<Vec<Option<usize>>, InputError> {
+    spec.axes
+        .iter()
+        .enumerate()
+        .map(|(i, a)| match &a.measure {
+            Measure::Position { segment, .. } => rig.index_of(segment).map(Some).ok_or_else(|| {
+                let problem = format!(
+                    "no segment {segment:?} in the rig (segments: {})",
+                    rig.names.join(", ")
+                );
+                spec.source
+                    .error_line(a.line, &format!("axis[{i}].segment"), problem)
+            }),
+            _ => Ok(None),
+        })
+        .collect()
+}
+
+/// A parameter measured on a normalized pose.
+fn position_param(axis: &AxisSpec, seg: Option<usize>, pose: &[Seg]) -> Option<f64> {
+    match (&axis.measure, seg) {
+        (Measure::Position { component, .. }, Some(s)) => {
+            pose.get(s).map(|p| p.0.to_array()[*component])
+        }
+        _ => None,
+    }
+}
+
+/// Grid examples: the chosen frames of every clip, normalized.
+pub fn grid_records(spec: &Spec, m: &MocapSpec, mocap: &Mocap) -> Result<Vec<Record>, BuildError> {
+    let segs = measure_segments(spec, &mocap.rig)?;
+    let forward = DVec3::from_array(m.forward);
+    let mut out = Vec::new();
+    for (g, (c, clip)) in m.clips.iter().zip(&mocap.clips).enumerate() {
+        let n = clip.poses.len();
+        let ranges = c
+            .frames
+            .clone()
+            .unwrap_or_else(|| vec![[0, n.saturating_sub(1)]]);
+        for [a, b] in ranges {
+            if b >= n {
+                let problem = format!(
+                    "frame {b} is past the last frame {} of {}",
+                    n.saturating_sub(1),
+                    clip.name
+                );
+                return Err(spec
+                    .source
+                    .error_line(c.line, &format!("clip[{g}].frames"), problem)
+                    .into());
+            }
+            for f in (a..=b).step_by(c.every.unwrap_or(m.every)) {
+                let world = &clip.poses[f];
+                let frame = match spec.frame {
+                    FrameKind::Heading => Frame::heading(&world[0], forward, None),
+                    FrameKind::World => Frame::WORLD,
+                };
+                let pose = frame.apply(world);
+                let params = grid_params(spec, c, &segs, &pose);
+                out.push(Record {
+                    params,
+                    value: Value {
+                        poses: pose,
+                        scalars: Vec::new(),
+                    },
+                    group: g,
+                });
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn grid_params(spec: &Spec, c: &ClipSpec, segs: &[Option<usize>], pose: &[Seg]) -> Vec<f64> {
+    spec.axes
+        .iter()
+        .zip(segs)
+        .enumerate()
+        .map(|(k, (a, &s))| {
+            position_param(a, s, pose)
+                .or_else(|| c.params.as_ref().and_then(|p| p.get(k).copied()))
+                .unwrap_or(0.0)
+        })
+        .collect()
+}
+
+/// Motion-table examples: one time-resampled clip each.
+pub fn clip_records(spec: &Spec, m: &MocapSpec, mocap: &Mocap) -> Result<Vec<Record>, BuildError> {
+    let segs = measure_segments(spec, &mocap.rig)?;
+    let forward = DVec3::from_array(m.forward);
+    let segments = mocap.rig.names.len();
+    let mut out = Vec::new();
+    for (g, (c, clip)) in m.clips.iter().zip(&mocap.clips).enumerate() {
+        let last = *c.cut.last().unwrap_or(&0);
+        if last >= clip.poses.len() {
+            let problem = format!(
+                "frame {last} is past the last frame {} of {}",
+                clip.poses.len().saturating_sub(1),
+                clip.name
+            );
+            return Err(spec
+                .source
+                .error_line(c.line, &format!("clip[{g}].cut"), problem)
+                .into());
+        }
+        let first = c.cut[0];
+        let (frames, travel) = normalized_clip(spec, &spec.motion, clip, first, last, forward);
+        let poses = time_resample(&spec.motion, &frames, &c.cut, clip.frame_time, segments)
+            .map_err(|e| pose_error(&clip.name, e))?;
+        let durations: Vec<f64> = c
+            .cut
+            .windows(2)
+            .map(|w| (w[1] - w[0]) as f64 * clip.frame_time)
+            .collect();
+        let total: f64 = durations.iter().sum();
+        let at = if c.cut.len() > 2 { c.cut[1] - first } else { 0 };
+        let params = spec
+            .axes
+            .iter()
+            .zip(&segs)
+            .enumerate()
+            .map(|(k, (a, &s))| match a.measure {
+                Measure::Speed => travel / total,
+                _ => position_param(a, s, &frames[at])
+                    .or_else(|| c.params.as_ref().and_then(|p| p.get(k).copied()))
+                    .unwrap_or(0.0),
+            })
+            .collect();
+        out.push(Record {
+            params,
+            value: Value {
+                poses,
+                scalars: durations,
+            },
+            group: g,
+        });
+    }
+    Ok(out)
+}
+
+/// Frames `first..=last` in the clip's frame (travel removed when looping);
+/// also returns the horizontal travel in metres.
+fn normalized_clip(
+    spec: &Spec,
+    motion: &MotionSpec,
+    clip: &Clip,
+    first: usize,
+    last: usize,
+    forward: DVec3,
+) -> (Vec<Vec<Seg>>, f64) {
+    let start = clip.poses[first][0];
+    let end = clip.poses[last][0];
+    let d = DVec3::new(end.0.x - start.0.x, 0.0, end.0.z - start.0.z);
+    let travel = d.length();
+    let direction = (motion.looping && travel > 0.05).then_some(d);
+    let frame = match spec.frame {
+        FrameKind::Heading => Frame::heading(&start, forward, direction),
+        FrameKind::World => Frame::WORLD,
+    };
+    let span = (last - first) as f64;
+    let local_travel = frame.rot * d;
+    let frames = (first..=last)
+        .map(|f| {
+            let mut pose = frame.apply(&clip.poses[f]);
+            if motion.looping {
+                let shift = local_travel * ((f - first) as f64 / span);
+                pose.iter_mut().for_each(|s| s.0 -= shift);
+            }
+            pose
+        })
+        .collect();
+    (frames, travel)
+}
+
+/// Resamples each phase to `motion.frames` steps (W&H Fig. 6) and, for a
+/// loop, blends the seam; returns `[frame][segment]` flattened.
+fn time_resample(
+    motion: &MotionSpec,
+    frames: &[Vec<Seg>],
+    cut: &[usize],
+    frame_time: f64,
+    segments: usize,
+) -> Result<Vec<Seg>, clip::ClipError> {
+    let first = cut[0];
+    let mut out: Vec<Seg> = Vec::new();
+    for (k, w) in cut.windows(2).enumerate() {
+        let src = &frames[w[0] - first..=w[1] - first];
+        let positions: Vec<Vec3> = src.iter().flatten().map(|s| s.0.as_vec3()).collect();
+        let rotations: Vec<Quat> = src.iter().flatten().map(|s| s.1.as_quat()).collect();
+        let samples = SliceSamples::new(segments, &positions, &rotations)
+            .ok_or(clip::ClipError::OutputLength)?;
+        let times: Vec<f32> = (0..src.len())
+            .map(|i| (i as f64 * frame_time) as f32)
+            .collect();
+        let span = Span {
+            start: 0.0,
+            end: ((src.len() - 1) as f64 * frame_time) as f32,
+        };
+        let n = motion.frames + 1;
+        let mut p = vec![Vec3::ZERO; n * segments];
+        let mut r = vec![Quat::IDENTITY; n * segments];
+        clip::resample(&samples, &times, span, false, n, &mut p, &mut r)?;
+        let keep = if motion.looping {
+            clip::seam_blend(&mut p, &mut r, segments, motion.seam_window)?
+        } else if k + 1 == cut.len() - 1 {
+            n
+        } else {
+            // The boundary frame starts the next phase.
+            n - 1
+        };
+        out.extend(
+            p.iter()
+                .zip(&r)
+                .take(keep * segments)
+                .map(|(p, q)| (p.as_dvec3(), q.as_dquat().normalize())),
+        );
+    }
+    Ok(out)
+}

@@ -1,0 +1,335 @@
+//! Retargeting mocap to the rig's proportions.
+//!
+//! The rig is a skeleton with its own offsets (joint origins in the parent's
+//! frame) and, per rig segment, the mocap segment it follows. Retargeting
+//! keeps every segment's **world rotation** from the mocap and rebuilds all
+//! positions by the core's forward kinematics with the **rig's offsets**:
+//! the local rotation of rig segment `i` is `conj(W[parent]) · W[i]` (the
+//! mocap world rotations of the mapped segments), the root is placed at the
+//! mocap root position times the rig's root scale, and
+//! [`marionette_core::pose::forward`] does the rest. Every limb therefore has
+//! exactly the rig's length in every example (W&H's limb-length enforcement,
+//! applied at the source), and the hand positions the parameters are measured
+//! from are the rig's hand positions.
+//!
+//! The rig comes from one of:
+//!
+//! - **a rig file** (`[rig] file = "rigs/cmu31.toml"`, see
+//!   [`crate::rigfile`]): its segments, offsets and `[retarget]` map (mocap
+//!   joint → segment, with an optional `rotation_offset` applied after the
+//!   mocap joint's world rotation: `W_rig = W_mocap · offset`). A segment
+//!   with no mocap joint keeps its rest orientation relative to its parent.
+//!   The root's path is scaled by the rig's rest hip height (`root_position`
+//!   y) over the mocap skeleton's rest hip height (the drop from the root to
+//!   its lowest joint with every rotation at zero). The table's rig hash is
+//!   the rig file's, so the firmware can check the pairing;
+//! - **the mocap skeleton itself** (no `file`), optionally scaled (`[rig]
+//!   scale`, which also scales the root's path) and with per-segment length
+//!   factors (`[rig] lengths`, a factor on the segment's offset from its
+//!   parent). With neither, the retarget is the identity up to `f32`
+//!   rounding; the rig hash is then an FNV-1a hash of the skeleton.
+//!
+//! Not handled: rest frames that differ between mocap and rig beyond what a
+//! constant `rotation_offset` expresses, and floor contact after non-uniform
+//! length changes (the root height is scaled uniformly, so feet may float or
+//! sink when only the legs are lengthened).
+
+use glam::{Quat, Vec3};
+use marionette_core::pose::{self, Hierarchy, LocalPose, NO_PARENT, Pose};
+
+use super::error::{InputError, Source};
+use super::spec::RigSpec;
+use crate::import::CoreSkeleton;
+use crate::rigfile::RigFile;
+
+/// Segment capacity of the poses used while building (the blob's limit).
+pub const CAP: usize = 256;
+
+/// A rig: names, topology, offsets, and the mocap segment each follows.
+#[derive(Debug, Clone)]
+pub struct Rig {
+    /// Segment names (the table's segment names).
+    pub names: Vec<String>,
+    /// Parents ([`NO_PARENT`] for the root).
+    pub parents: Vec<u8>,
+    /// Offsets in the parent's frame, metres.
+    pub offsets: Vec<Vec3>,
+    /// Mocap segment followed by each rig segment (`None`: rigid with the
+    /// parent).
+    pub source: Vec<Option<usize>>,
+    /// Rotation applied after the mocap segment's world rotation.
+    pub rotation_offsets: Vec<Quat>,
+    /// Factor on the mocap root position.
+    pub root_scale: f32,
+    /// The table's rig hash.
+    pub hash: u64,
+    /// The rig file, if the rig came from one.
+    pub file: Option<Box<RigFile>>,
+}
+
+impl Rig {
+    /// The mocap skeleton as a rig, scaled by `spec`; `src` locates errors
+    /// in the spec.
+    pub fn from_skeleton(
+        sk: &CoreSkeleton,
+        spec: &RigSpec,
+        src: &Source,
+    ) -> Result<Self, InputError> {
+        for name in spec.lengths.keys() {
+            if sk.index_of(name).is_none() {
+                let field = format!("rig.lengths.{name}");
+                return Err(src.error_line(
+                    spec.line,
+                    &field,
+                    format!("no segment {name:?} in the skeleton"),
+                ));
+            }
+        }
+        let scale = spec.scale as f32;
+        let offsets = sk
+            .names
+            .iter()
+            .zip(&sk.offsets)
+            .map(|(n, &o)| o * scale * spec.lengths.get(n).map_or(1.0, |&f| f as f32))
+            .collect();
+        let mut rig = Self {
+            names: sk.names.clone(),
+            parents: sk.parents.clone(),
+            offsets,
+            source: (0..sk.len()).map(Some).collect(),
+            rotation_offsets: vec![Quat::IDENTITY; sk.len()],
+            root_scale: scale,
+            hash: 0,
+            file: None,
+        };
+        rig.hash = rig.skeleton_hash();
+        Ok(rig)
+    }
+
+    /// The rig of a rig file, driven by the mocap skeleton `sk` through the
+    /// file's retarget map; `src` and `line` locate errors in the spec.
+    pub fn from_rigfile(
+        file: RigFile,
+        sk: &CoreSkeleton,
+        src: &Source,
+        line: usize,
+    ) -> Result<Self, InputError> {
+        let desc = file.desc();
+        let n = desc.segments.len();
+        let mut source = vec![None; n];
+        let mut rotation_offsets = vec![Quat::IDENTITY; n];
+        for r in &file.retarget {
+            let Some(j) = sk.index_of(&r.mocap) else {
+                let seg = file
+                    .segment_names()
+                    .get(usize::from(r.segment))
+                    .cloned()
+                    .unwrap_or_default();
+                let problem = format!(
+                    "{}: the retarget map drives {seg:?} from mocap joint {:?}, which the mocap skeleton does not have",
+                    file.file, r.mocap
+                );
+                return Err(src.error_line(line, "rig.file", problem));
+            };
+            let i = usize::from(r.segment);
+            if i < n {
+                source[i] = Some(j);
+                let [w, x, y, z] = r.rotation_offset.map(|c| c as f32);
+                rotation_offsets[i] = Quat::from_xyzw(x, y, z, w).normalize();
+            }
+        }
+        if source.first().is_none_or(Option::is_none) {
+            let problem = format!(
+                "{}: the retarget map must drive the root segment",
+                file.file
+            );
+            return Err(src.error_line(line, "rig.file", problem));
+        }
+        let rig_height = desc.root_position[1];
+        let mocap_height = rest_height(sk);
+        let root_scale = if rig_height > 0.0 && mocap_height > 1e-3 {
+            rig_height / mocap_height
+        } else {
+            1.0
+        };
+        Ok(Self {
+            names: file.segment_names().to_vec(),
+            parents: desc.segments.iter().map(|s| s.parent).collect(),
+            offsets: desc
+                .segments
+                .iter()
+                .map(|s| Vec3::from_array(s.origin))
+                .collect(),
+            source,
+            rotation_offsets,
+            root_scale,
+            hash: file.rig_hash(),
+            file: Some(Box::new(file)),
+        })
+    }
+
+    /// The rig's hierarchy.
+    #[must_use]
+    pub fn hierarchy(&self) -> Hierarchy<'_> {
+        Hierarchy {
+            parents: &self.parents,
+            offsets: &self.offsets,
+        }
+    }
+
+    /// Index of a segment.
+    #[must_use]
+    pub fn index_of(&self, name: &str) -> Option<usize> {
+        self.names.iter().position(|n| n == name)
+    }
+
+    /// A 64-bit FNV-1a hash of the skeleton (names, parents, offset bits):
+    /// the rig hash of a rig without a rig file.
+    #[must_use]
+    pub fn skeleton_hash(&self) -> u64 {
+        let mut h = Fnv::new();
+        for ((n, &p), o) in self.names.iter().zip(&self.parents).zip(&self.offsets) {
+            h.bytes(n.as_bytes());
+            h.bytes(&[0, p]);
+            for c in o.to_array() {
+                h.bytes(&c.to_bits().to_le_bytes());
+            }
+        }
+        h.0
+    }
+
+    /// Retargets a mocap world pose (see the module doc) into `out`.
+    pub fn retarget(&self, mocap: &Pose<CAP>, out: &mut Pose<CAP>) -> Result<(), pose::PoseError> {
+        let n = self.names.len();
+        let mut local = LocalPose::<CAP>::new(n)?;
+        // World rotations of the rig's segments, parents first.
+        let mut world = vec![Quat::IDENTITY; n];
+        for i in 0..n {
+            let parent = self.parents.get(i).copied().unwrap_or(NO_PARENT);
+            let inherited = world
+                .get(usize::from(parent))
+                .copied()
+                .unwrap_or(Quat::IDENTITY);
+            world[i] = match self.source[i].and_then(|s| mocap.rotations().get(s)) {
+                Some(&w) => w * self.rotation_offsets[i],
+                None => inherited,
+            };
+            local.rotations[i] = if parent == NO_PARENT {
+                world[i]
+            } else {
+                inherited.conjugate() * world[i]
+            };
+        }
+        let root = self.source[0]
+            .and_then(|s| mocap.positions().get(s))
+            .copied();
+        local.root_position = root.unwrap_or(Vec3::ZERO) * self.root_scale;
+        pose::forward(&self.hierarchy(), &local, out)
+    }
+}
+
+/// The drop from the root to the lowest joint of the rest pose (every
+/// rotation zero): the mocap skeleton's hip height.
+fn rest_height(sk: &CoreSkeleton) -> f32 {
+    let mut y = vec![0.0f32; sk.len()];
+    for i in 1..sk.len() {
+        let p = usize::from(sk.parents[i]);
+        y[i] = y.get(p).copied().unwrap_or(0.0) + sk.offsets[i].y;
+    }
+    -y.iter().copied().fold(0.0, f32::min)
+}
+
+/// 64-bit FNV-1a.
+pub struct Fnv(pub u64);
+
+impl Fnv {
+    /// The offset basis.
+    #[must_use]
+    pub fn new() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+
+    /// Hashes `bytes` in.
+    pub fn bytes(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 ^= u64::from(b);
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+}
+
+impl Default for Fnv {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeMap;
+
+    fn skeleton() -> CoreSkeleton {
+        CoreSkeleton {
+            names: vec!["root".into(), "upper".into(), "lower".into()],
+            parents: vec![NO_PARENT, 0, 1],
+            offsets: vec![
+                Vec3::ZERO,
+                Vec3::new(0.0, -0.3, 0.0),
+                Vec3::new(0.0, -0.25, 0.0),
+            ],
+            joints: vec![0, 1, 2],
+        }
+    }
+
+    #[test]
+    fn keeps_rotations_and_imposes_rig_lengths() {
+        let sk = skeleton();
+        let src = Source {
+            file: "s.toml".into(),
+            text: String::new(),
+        };
+        let mut lengths = BTreeMap::new();
+        lengths.insert("lower".to_owned(), 2.0);
+        let rig = Rig::from_skeleton(
+            &sk,
+            &RigSpec {
+                file: None,
+                scale: 0.5,
+                lengths,
+                line: 3,
+            },
+            &src,
+        )
+        .unwrap();
+        // A mocap pose: root at (0, 2, 0) turned 90° about Y, elbow bent 90° about X.
+        let mut local = LocalPose::<CAP>::new(3).unwrap();
+        local.root_position = Vec3::new(0.0, 2.0, 0.0);
+        local.rotations[0] = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+        local.rotations[2] = Quat::from_rotation_x(std::f32::consts::FRAC_PI_2);
+        let mut mocap = Pose::<CAP>::default();
+        pose::forward(&sk.hierarchy(), &local, &mut mocap).unwrap();
+        let mut out = Pose::<CAP>::default();
+        rig.retarget(&mocap, &mut out).unwrap();
+        for i in 0..3 {
+            assert!(out.rotations[i].dot(mocap.rotations[i]).abs() > 1.0 - 1e-6);
+        }
+        // Root scaled by 0.5 to (0, 1, 0); upper 0.3·0.5 m below it; lower
+        // 0.25·0.5·2 m further down (upper is not rotated locally).
+        assert!((out.positions[0] - Vec3::new(0.0, 1.0, 0.0)).length() < 1e-6);
+        assert!((out.positions[1] - Vec3::new(0.0, 0.85, 0.0)).length() < 1e-6);
+        assert!((out.positions[2] - Vec3::new(0.0, 0.6, 0.0)).length() < 1e-6);
+        // A point below `lower` in its frame: the X bend takes −Y to −Z, the
+        // root's 90° Y turn takes −Z to −X.
+        let tip = out.positions[2] + out.rotations[2] * Vec3::new(0.0, -0.25, 0.0);
+        assert!((tip - Vec3::new(-0.25, 0.6, 0.0)).length() < 1e-5, "{tip}");
+        let bad = RigSpec {
+            file: None,
+            scale: 1.0,
+            lengths: [("elbow".to_owned(), 1.0)].into(),
+            line: 3,
+        };
+        let e = Rig::from_skeleton(&sk, &bad, &src).unwrap_err();
+        assert_eq!((e.line, e.field.as_str()), (3, "rig.lengths.elbow"));
+    }
+}

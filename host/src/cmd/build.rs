@@ -1,0 +1,335 @@
+//! `marionette build SPEC -o tables.bin`: build a table blob from mocap or a
+//! JSON example set (see [`crate::build`]), print what was measured, and
+//! optionally measure held-out error (`--holdout CLIP|all`).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use serde_json::json;
+
+use super::CmdError;
+use crate::build::{self, Built, Dataset, Progress, examples, measure, spec};
+
+/// Arguments of `marionette build`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The build spec (`.toml`), or a JSON example set (`.json`).
+    pub spec: PathBuf,
+    /// Where to write the table blob.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Leave this clip out (name or file stem, or `all` for each in turn),
+    /// build from the rest and report the error of synthesizing at its
+    /// parameters.
+    #[arg(long)]
+    pub holdout: Option<String>,
+    /// Also write the examples (after retargeting and normalization) as a
+    /// JSON example set.
+    #[arg(long)]
+    pub examples_out: Option<PathBuf>,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+    /// Never draw a progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Runs the build.
+pub fn run(args: &Args) -> Result<(), CmdError> {
+    if args.output.is_none() && args.holdout.is_none() && args.examples_out.is_none() {
+        return Err("nothing to do: give -o FILE, --holdout CLIP or --examples-out FILE".into());
+    }
+    let start = Instant::now();
+    let spec = read_spec(&args.spec)?;
+    let progress = Progress::new(!args.quiet);
+    let data = build::load(&spec, &progress)?;
+    if let Some(path) = &args.examples_out {
+        write_examples(&data, path)?;
+    }
+    let mut report = serde_json::Map::new();
+    if let Some(out) = &args.output {
+        let built = build::build(&spec, &data, None, &progress)?;
+        std::fs::write(out, &built.blob).map_err(|source| build::BuildError::Write {
+            file: out.display().to_string(),
+            source,
+        })?;
+        progress.finish();
+        let total = start.elapsed().as_secs_f64();
+        if args.json {
+            report.insert("build".into(), build_json(&built, &data, out, total));
+        } else {
+            print!("{}", build_text(&args.spec, out, &built, &data, total));
+        }
+    }
+    if let Some(which) = &args.holdout {
+        let groups = holdout_groups(&data, which)?;
+        let rows = groups
+            .iter()
+            .map(|&g| measure::holdout(&spec, &data, g, &progress))
+            .collect::<Result<Vec<_>, _>>()?;
+        progress.finish();
+        if args.json {
+            report.insert("holdout".into(), serde_json::to_value(&rows)?);
+        } else {
+            print!("{}", holdout_text(&rows));
+        }
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    }
+    Ok(())
+}
+
+fn read_spec(path: &std::path::Path) -> Result<spec::Spec, CmdError> {
+    let is_json = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    if !is_json {
+        return Ok(spec::read(path)?);
+    }
+    // A bare example set: a grid spec with every default.
+    let source = build::error::Source {
+        file: format!("{} (implied spec)", path.display()),
+        text: String::new(),
+    };
+    let name = path
+        .file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let text = format!("examples = {}\n", toml_string(&name));
+    let dir = path
+        .parent()
+        .map(std::path::Path::to_path_buf)
+        .unwrap_or_default();
+    Ok(spec::parse(build::error::Source { text, ..source }, dir)?)
+}
+
+fn toml_string(s: &str) -> String {
+    serde_json::to_string(s).unwrap_or_default()
+}
+
+fn holdout_groups(data: &Dataset, which: &str) -> Result<Vec<usize>, CmdError> {
+    if which == "all" {
+        return Ok((0..data.groups.len()).collect());
+    }
+    let hits: Vec<usize> = (0..data.groups.len())
+        .filter(|&g| data.groups[g].contains(which))
+        .collect();
+    match hits.as_slice() {
+        [one] => Ok(vec![*one]),
+        [] => Err(format!(
+            "--holdout {which}: no clip matches (clips: {})",
+            data.groups.join(", ")
+        )
+        .into()),
+        _ => {
+            let names: Vec<&str> = hits.iter().map(|&g| data.groups[g].as_str()).collect();
+            Err(format!(
+                "--holdout {which}: several clips match ({})",
+                names.join(", ")
+            )
+            .into())
+        }
+    }
+}
+
+fn write_examples(data: &Dataset, path: &std::path::Path) -> Result<(), CmdError> {
+    if data.layout != build::Layout::Grid {
+        return Err("--examples-out: only grid builds have single-pose examples".into());
+    }
+    let set = examples::ExampleSet {
+        segments: data.segments.clone(),
+        axes: data.axes.clone(),
+        examples: data
+            .records
+            .iter()
+            .map(|r| examples::Example {
+                params: r.params.clone(),
+                pose: r.value.poses.clone(),
+            })
+            .collect(),
+    };
+    let text = serde_json::to_string(&examples::to_json(&set))?;
+    std::fs::write(path, text).map_err(|source| build::BuildError::Write {
+        file: path.display().to_string(),
+        source,
+    })?;
+    Ok(())
+}
+
+fn mm(m: f64) -> String {
+    format!("{:.1} mm", m * 1000.0)
+}
+
+fn build_text(
+    spec: &std::path::Path,
+    out: &std::path::Path,
+    b: &Built,
+    data: &Dataset,
+    total: f64,
+) -> String {
+    let r = &b.report;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "built {} -> {} ({} bytes)",
+        spec.display(),
+        out.display(),
+        r.bytes
+    );
+    let _ = writeln!(
+        s,
+        "  examples: {} from {} group(s); {} segments; rig hash {:#018x}",
+        r.examples,
+        r.groups,
+        data.segments.len(),
+        data.rig_hash
+    );
+    if r.scores.is_empty() {
+        let _ = writeln!(
+            s,
+            "  resampling: {} (too few groups to cross-validate)",
+            r.method
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "  resampling, cross-validated (each group held out in turn; mean per-joint position error, median hand error, mean rotation error):"
+        );
+        for sc in &r.scores {
+            let mark = if sc.method == r.method { "*" } else { " " };
+            let probe = sc.median_probe.map_or_else(|| "-".to_owned(), mm);
+            let _ = writeln!(
+                s,
+                "   {mark} {:<30} {:>9} {:>9} {:>7.2}°",
+                sc.method.to_string(),
+                mm(sc.mean_position),
+                probe,
+                sc.mean_rotation.to_degrees()
+            );
+        }
+    }
+    let axes: Vec<String> = b
+        .table
+        .axes
+        .iter()
+        .map(|a| format!("{} {}+{}×{}", a.name, a.min, a.step, a.count))
+        .collect();
+    let _ = writeln!(
+        s,
+        "  grid: {}; {} grid samples; valid cells {}/{}; {} samples taken exactly from examples",
+        axes.join(", "),
+        r.grid_samples,
+        r.valid_cells,
+        r.cells,
+        r.exact
+    );
+    let per_sample = marionette_core::table::SAMPLE_LEN;
+    let _ = writeln!(
+        s,
+        "  size: {} bytes per segment sample × {} segments × {} grid samples = {} bytes of samples; blob {} bytes",
+        per_sample,
+        data.segments.len(),
+        r.grid_samples,
+        per_sample * data.segments.len() * r.grid_samples,
+        r.bytes
+    );
+    let q = &r.quant;
+    let _ = writeln!(
+        s,
+        "  quantization vs the unquantized table: stored samples max {:.4} mm (bound {:.4} mm), {:.5}° (bound {:.5}°); synthesized at {} points max {:.4} mm, {:.5}°",
+        q.max_position * 1000.0,
+        q.position_bound * 1000.0,
+        q.max_rotation.to_degrees(),
+        q.rotation_bound.to_degrees(),
+        q.synth_points,
+        q.synth_max_position * 1000.0,
+        q.synth_max_rotation.to_degrees()
+    );
+    let [import, cv, grid, write] = r.seconds;
+    let _ = writeln!(
+        s,
+        "  time: import {import:.2} s, cross-validation {cv:.2} s, resampling {grid:.2} s, writing + measuring {write:.2} s; total {total:.2} s"
+    );
+    s
+}
+
+fn build_json(b: &Built, data: &Dataset, out: &std::path::Path, total: f64) -> serde_json::Value {
+    let r = &b.report;
+    let scores: Vec<_> = r
+        .scores
+        .iter()
+        .map(|s| {
+            json!({
+                "method": s.method.to_string(),
+                "mean_position_m": s.mean_position,
+                "median_probe_m": s.median_probe,
+                "mean_rotation_rad": s.mean_rotation,
+            })
+        })
+        .collect();
+    json!({
+        "output": out.display().to_string(),
+        "bytes": r.bytes,
+        "examples": r.examples,
+        "groups": r.groups,
+        "segments": data.segments.len(),
+        "method": r.method.to_string(),
+        "cross_validation": scores,
+        "grid_samples": r.grid_samples,
+        "cells": r.cells,
+        "valid_cells": r.valid_cells,
+        "exact_samples": r.exact,
+        "sample_bytes": marionette_core::table::SAMPLE_LEN,
+        "quantization": r.quant,
+        "seconds": {
+            "import": r.seconds[0], "cross_validation": r.seconds[1],
+            "resampling": r.seconds[2], "writing": r.seconds[3], "total": total,
+        },
+    })
+}
+
+fn holdout_text(rows: &[measure::Holdout]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "hold-out (build without the clip, synthesize with the core at its examples' parameters):"
+    );
+    let _ = writeln!(
+        s,
+        "  {:<40} {:>5} {:>11} {:>11} {:>11} {:>11} {:>5}  method",
+        "clip", "n", "hand med", "joint mean", "solved hand", "solved jnt", "proj"
+    );
+    let opt = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), mm);
+    let mut all_probe = Vec::new();
+    let mut all_joint = Vec::new();
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "  {:<40} {:>5} {:>11} {:>11} {:>11} {:>11} {:>5}  {}",
+            r.clip,
+            r.examples,
+            opt(r.median_probe),
+            mm(r.mean_joint),
+            opt(r.solved.map(|x| x.median_probe)),
+            opt(r.solved.map(|x| x.mean_joint)),
+            r.projected,
+            r.method
+        );
+        if let Some(d) = r.duration_error {
+            let _ = writeln!(s, "    duration error {:.1} %", d * 100.0);
+        }
+        all_probe.extend(r.median_probe);
+        all_joint.push(r.mean_joint);
+    }
+    if rows.len() > 1 {
+        let _ = writeln!(
+            s,
+            "  mean over clips: hand median {}, per-joint mean {}",
+            opt((!all_probe.is_empty()).then(|| build::resample::mean(&all_probe))),
+            mm(build::resample::mean(&all_joint))
+        );
+    }
+    s
+}

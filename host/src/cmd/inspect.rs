@@ -1,0 +1,193 @@
+//! `marionette inspect BLOB [--json]`: a table blob's header and sizes.
+//!
+//! JSON keys (a contract): `bytes`, `version`, `kind` (`"grid"` |
+//! `"clips"`), `phases` (clips) or null, `rig_hash` (hex string), `axes`
+//! (`name`, `min`, `max`, `step`, `count`, `cyclic`, `cubic`; `max` is the
+//! last sample, or `min` + period on a cyclic axis), `segments` (names),
+//! `sample_bytes` (bytes per segment sample, 12), `pose_bytes` (per grid
+//! sample), `grid_samples`, `param_samples`, `cells`, `valid_cells`,
+//! `sections` (bytes: `header` = prefix, postcard header and padding before
+//! the arrays; `samples`, `valid`, `durations`, `crc`),
+//! `position_scale` (m per LSB), `position_bound_m`, `rotation_bound_rad`,
+//! `durations` (`min`, `max` seconds, or null for a grid).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use marionette_core::table::{Kind, SAMPLE_LEN, Table, Wrap};
+use serde_json::json;
+
+use super::CmdError;
+
+/// Arguments of `marionette inspect`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The table blob.
+    pub blob: PathBuf,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Reads a blob file and parses it with the core reader.
+pub fn read_blob(path: &std::path::Path) -> Result<Vec<u8>, CmdError> {
+    std::fs::read(path).map_err(|e| format!("{}: cannot read: {e}", path.display()).into())
+}
+
+/// Runs the inspection.
+pub fn run(args: &Args) -> Result<(), CmdError> {
+    let bytes = read_blob(&args.blob)?;
+    let table = Table::parse(&bytes).map_err(|e| format!("{}: {e}", args.blob.display()))?;
+    let v = describe(&table);
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        print!("{}", text(&args.blob, &v));
+    }
+    Ok(())
+}
+
+/// The JSON description of a table.
+#[must_use]
+pub fn describe(t: &Table<'_>) -> serde_json::Value {
+    let h = t.header();
+    let axes: Vec<_> = t
+        .axes()
+        .iter()
+        .map(|a| {
+            let (max, cyclic) = match a.wrap {
+                Wrap::Bounded => (a.min + a.step * f32::from(a.count - 1), false),
+                Wrap::Cyclic { period } => (a.min + period, true),
+            };
+            json!({
+                "name": a.name().unwrap_or(""), "min": a.min, "max": max, "step": a.step,
+                "count": a.count, "cyclic": cyclic,
+                "cubic": a.interp == marionette_core::table::Interp::CatmullRom,
+            })
+        })
+        .collect();
+    let segments: Vec<&str> = (0..t.segment_count())
+        .map(|i| t.segment_name(i).unwrap_or(""))
+        .collect();
+    let valid = (0..t.param_cells())
+        .filter(|&c| t.cell_valid(c) == Some(true))
+        .count();
+    let (kind, phases) = match t.kind() {
+        Kind::Grid => ("grid", None),
+        Kind::Clips { phases } => ("clips", Some(phases)),
+    };
+    let durations = phases.map(|p| {
+        let all: Vec<f32> = (0..t.param_samples())
+            .flat_map(|i| (0..usize::from(p)).filter_map(move |k| t.duration(i, k)))
+            .collect();
+        json!({
+            "min": all.iter().copied().fold(f32::INFINITY, f32::min),
+            "max": all.iter().copied().fold(0.0_f32, f32::max),
+        })
+    });
+    json!({
+        "bytes": t.len(),
+        "version": marionette_core::table::VERSION,
+        "kind": kind,
+        "phases": phases,
+        "rig_hash": format!("{:#018x}", t.rig_hash()),
+        "axes": axes,
+        "segments": segments,
+        "sample_bytes": SAMPLE_LEN,
+        "pose_bytes": SAMPLE_LEN * t.segment_count(),
+        "grid_samples": t.grid_samples(),
+        "param_samples": t.param_samples(),
+        "cells": t.param_cells(),
+        "valid_cells": valid,
+        "sections": {
+            "header": h.samples.offset,
+            "samples": h.samples.len,
+            "valid": h.valid.len,
+            "durations": h.durations.len,
+            "crc": marionette_core::table::CRC_LEN,
+        },
+        "position_scale": h.position_scale,
+        "position_bound_m": h.position_bound,
+        "rotation_bound_rad": h.rotation_bound,
+        "durations": durations,
+    })
+}
+
+fn text(path: &std::path::Path, v: &serde_json::Value) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{}: table blob v{}, {} bytes",
+        path.display(),
+        v["version"],
+        v["bytes"]
+    );
+    let kind = v["kind"].as_str().unwrap_or("");
+    match v["phases"].as_u64() {
+        Some(p) => {
+            let _ = writeln!(
+                s,
+                "  kind: {kind} ({p} phase(s)); rig hash {}",
+                v["rig_hash"].as_str().unwrap_or("")
+            );
+        }
+        None => {
+            let _ = writeln!(
+                s,
+                "  kind: {kind}; rig hash {}",
+                v["rig_hash"].as_str().unwrap_or("")
+            );
+        }
+    }
+    for a in v["axes"].as_array().into_iter().flatten() {
+        let _ = writeln!(
+            s,
+            "  axis {:<24} {} .. {} step {} × {}{}{}",
+            a["name"].as_str().unwrap_or(""),
+            a["min"],
+            a["max"],
+            a["step"],
+            a["count"],
+            if a["cyclic"] == true { ", cyclic" } else { "" },
+            if a["cubic"] == true {
+                ", Catmull-Rom"
+            } else {
+                ""
+            }
+        );
+    }
+    let names: Vec<&str> = v["segments"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|n| n.as_str())
+        .collect();
+    let _ = writeln!(s, "  segments ({}): {}", names.len(), names.join(" "));
+    let _ = writeln!(
+        s,
+        "  samples: {} grid samples × {} bytes ({} per segment sample) = {} bytes",
+        v["grid_samples"], v["pose_bytes"], v["sample_bytes"], v["sections"]["samples"]
+    );
+    let _ = writeln!(s, "  valid cells: {} of {}", v["valid_cells"], v["cells"]);
+    let _ = writeln!(
+        s,
+        "  sections (bytes): prefix + header + padding {}, samples {}, validity mask {}, durations {}, CRC {}",
+        v["sections"]["header"],
+        v["sections"]["samples"],
+        v["sections"]["valid"],
+        v["sections"]["durations"],
+        v["sections"]["crc"]
+    );
+    let _ = writeln!(
+        s,
+        "  error bound: position {:.4} mm (scale {:.5} mm/LSB), rotation {:.5}° ({} rad)",
+        v["position_bound_m"].as_f64().unwrap_or(0.0) * 1000.0,
+        v["position_scale"].as_f64().unwrap_or(0.0) * 1000.0,
+        v["rotation_bound_rad"].as_f64().unwrap_or(0.0).to_degrees(),
+        v["rotation_bound_rad"]
+    );
+    if let Some(d) = v["durations"].as_object() {
+        let _ = writeln!(s, "  durations: {} .. {} s", d["min"], d["max"]);
+    }
+    s
+}
