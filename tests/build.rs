@@ -348,3 +348,31 @@ fn hdm05_grid_poses_keep_the_asf_bone_lengths_and_a_held_out_grab_is_plausible()
     let solved = h.solved.expect("a 31-segment rig is solvable");
     assert!(solved.median_probe < hand, "{h:?}");
 }
+
+#[test]
+fn walk_table_from_cmu_16_carries_the_rig_hash_and_the_cycle_durations() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let (data, built, _) = load_and_build(&root.join("data/builds/walk.toml"));
+    let table = Table::parse(&built.blob).unwrap();
+    // The rig file's own hash (computed by the rig-file reader, not the builder).
+    let rig = marionette_host::rigfile::load(&root.join("rigs/cmu31.toml")).unwrap();
+    assert_eq!(table.rig_hash(), rig.rig_hash());
+    assert_eq!(built.table.segment_names, rig.segment_names());
+    // One cycle each, cut in the spec: 16_21 frames 121..235 and 16_45
+    // frames 19..103 at 120 fps.
+    let speeds: Vec<f32> = data.records.iter().map(|r| r.params[0] as f32).collect();
+    for (speed, frames) in speeds.iter().zip([114.0f32, 84.0]) {
+        let s = query::synthesize(&table, &[*speed], Some(0.5)).unwrap();
+        let want = frames / 120.0;
+        assert!((s.duration.unwrap() - want).abs() < 1e-4, "{s:?}");
+    }
+    // Halfway in speed, the duration is halfway (W&H: interpolated duration).
+    let mid = 0.5 * (speeds[0] + speeds[1]);
+    let s = query::synthesize(&table, &[mid], Some(0.0)).unwrap();
+    assert!((s.duration.unwrap() - 99.0 / 120.0).abs() < 1e-4, "{s:?}");
+    // The walk is slower than the run (SOURCE.txt: ~1.7 and ~4.0 m/s).
+    assert!(
+        speeds[0] > 1.4 && speeds[0] < 2.0 && speeds[1] > 3.5 && speeds[1] < 4.5,
+        "{speeds:?}"
+    );
+}

@@ -143,6 +143,59 @@ impl Lcg {
     }
 }
 
+/// The source clips of a motion table synthesized back from its blob.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Reconstruction {
+    /// Source frames compared.
+    pub frames: usize,
+    /// Mean over frames of the mean per-joint position error, metres.
+    pub mean_joint: f64,
+    /// Largest per-joint position error, metres.
+    pub max_joint: f64,
+    /// Mean per-joint rotation error, radians.
+    pub mean_rotation: f64,
+}
+
+/// Synthesizes each source clip (but `exclude`) at its own parameters and
+/// at the phase of each of its original frames, and compares with those
+/// frames: what time resampling, the seam blend and quantization lose
+/// (`None` for a grid table).
+pub fn reconstruction(
+    data: &Dataset,
+    blob: &[u8],
+    exclude: Option<usize>,
+) -> Result<Option<Reconstruction>, BuildError> {
+    if data.originals.is_empty() {
+        return Ok(None);
+    }
+    let table = Table::parse(blob).map_err(readback)?;
+    let mut r = Reconstruction {
+        frames: 0,
+        mean_joint: 0.0,
+        max_joint: 0.0,
+        mean_rotation: 0.0,
+    };
+    for rec in data.records.iter().filter(|r| Some(r.group) != exclude) {
+        let params: Vec<f32> = rec.params.iter().map(|&p| p as f32).collect();
+        for (phase, truth) in &data.originals[rec.group] {
+            let s = query::synthesize(&table, &params, Some(*phase as f32))
+                .map_err(|e| BuildError::Data(e.to_string()))?;
+            let n = truth.len() as f64;
+            for ((p, q), (tp, tq)) in s.pose.iter().zip(truth) {
+                let d = (p.as_dvec3() - *tp).length();
+                r.mean_joint += d / n;
+                r.max_joint = r.max_joint.max(d);
+                r.mean_rotation += resample::rotation_angle(q.as_dquat(), *tq) / n;
+            }
+            r.frames += 1;
+        }
+    }
+    let f = r.frames.max(1) as f64;
+    r.mean_joint /= f;
+    r.mean_rotation /= f;
+    Ok(Some(r))
+}
+
 /// Errors after solving the hand goal.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Solved {

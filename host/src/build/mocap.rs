@@ -279,12 +279,22 @@ fn grid_params(spec: &Spec, c: &ClipSpec, segs: &[Option<usize>], pose: &[Seg]) 
         .collect()
 }
 
-/// Motion-table examples: one time-resampled clip each.
-pub fn clip_records(spec: &Spec, m: &MocapSpec, mocap: &Mocap) -> Result<Vec<Record>, BuildError> {
+/// A source clip's normalized frames with their phases (`k + fraction`
+/// within phase `k`), for measuring what time resampling loses.
+pub type Originals = Vec<(f64, Vec<Seg>)>;
+
+/// Motion-table examples: one time-resampled clip each, and each clip's
+/// normalized source frames.
+pub fn clip_records(
+    spec: &Spec,
+    m: &MocapSpec,
+    mocap: &Mocap,
+) -> Result<(Vec<Record>, Vec<Originals>), BuildError> {
     let segs = measure_segments(spec, &mocap.rig)?;
     let forward = DVec3::from_array(m.forward);
     let segments = mocap.rig.names.len();
     let mut out = Vec::new();
+    let mut originals = Vec::new();
     for (g, (c, clip)) in m.clips.iter().zip(&mocap.clips).enumerate() {
         let last = *c.cut.last().unwrap_or(&0);
         if last >= clip.poses.len() {
@@ -329,8 +339,27 @@ pub fn clip_records(spec: &Spec, m: &MocapSpec, mocap: &Mocap) -> Result<Vec<Rec
             },
             group: g,
         });
+        originals.push(phases_of(&c.cut, frames));
     }
-    Ok(out)
+    Ok((out, originals))
+}
+
+/// Each frame of `first..=last` with its phase.
+fn phases_of(cut: &[usize], frames: Vec<Vec<Seg>>) -> Originals {
+    let first = cut[0];
+    frames
+        .into_iter()
+        .enumerate()
+        .map(|(i, pose)| {
+            let f = first + i;
+            let k = cut
+                .windows(2)
+                .position(|w| f < w[1])
+                .unwrap_or(cut.len() - 2);
+            let (a, b) = (cut[k], cut[k + 1]);
+            (k as f64 + (f - a) as f64 / (b - a) as f64, pose)
+        })
+        .collect()
 }
 
 /// Frames `first..=last` in the clip's frame (travel removed when looping);

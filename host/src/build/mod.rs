@@ -172,6 +172,8 @@ pub struct Dataset {
     pub probe: Option<usize>,
     /// The segment the parameters are measured on.
     pub probe_segment: Option<usize>,
+    /// Clip tables: each group's normalized source frames with their phases.
+    pub originals: Vec<mocap::Originals>,
     /// Seconds spent importing.
     pub load_seconds: f64,
 }
@@ -262,6 +264,7 @@ fn from_examples(set: &examples::ExampleSet) -> Dataset {
         rig_hash: h.0,
         probe: None,
         probe_segment: None,
+        originals: Vec::new(),
         load_seconds: 0.0,
     }
 }
@@ -292,8 +295,8 @@ fn from_mocap(
             .error_line(m.clips[0].line, "clip[0].cut", problem)
             .into());
     }
-    let records = match layout {
-        Layout::Grid => mocap::grid_records(spec, m, &mocap)?,
+    let (records, originals) = match layout {
+        Layout::Grid => (mocap::grid_records(spec, m, &mocap)?, Vec::new()),
         Layout::Clips { .. } => mocap::clip_records(spec, m, &mocap)?,
     };
     let axes = spec
@@ -337,6 +340,7 @@ fn from_mocap(
         rig: Some(mocap.rig),
         probe,
         probe_segment,
+        originals,
         load_seconds: 0.0,
     })
 }
@@ -364,6 +368,8 @@ pub struct Report {
     pub bytes: usize,
     /// Measured quantization error.
     pub quant: measure::Quantization,
+    /// Clip tables: the source clips synthesized back from the blob.
+    pub reconstruction: Option<measure::Reconstruction>,
     /// Seconds: import, cross-validation, resampling, writing.
     pub seconds: [f64; 4],
 }
@@ -452,6 +458,7 @@ pub fn build(
     let table = table_spec(data, &grid)?;
     let blob = blob::write(&table)?;
     let quant = measure::quantization(&table, &blob)?;
+    let reconstruction = measure::reconstruction(data, &blob, exclude)?;
     let t3 = Instant::now();
     let mut groups: Vec<usize> = records.iter().map(|r| r.group).collect();
     groups.dedup();
@@ -466,6 +473,7 @@ pub fn build(
         exact: grid.exact,
         bytes: blob.len(),
         quant,
+        reconstruction,
         seconds: [
             data.load_seconds,
             (t1 - t0).as_secs_f64(),

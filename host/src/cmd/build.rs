@@ -247,6 +247,16 @@ fn build_text(
         q.synth_max_position * 1000.0,
         q.synth_max_rotation.to_degrees()
     );
+    if let Some(c) = &r.reconstruction {
+        let _ = writeln!(
+            s,
+            "  source clips synthesized back at their own parameters ({} source frames): per-joint mean {}, max {}, rotation mean {:.2}°",
+            c.frames,
+            mm(c.mean_joint),
+            mm(c.max_joint),
+            c.mean_rotation.to_degrees()
+        );
+    }
     let [import, cv, grid, write] = r.seconds;
     let _ = writeln!(
         s,
@@ -283,6 +293,7 @@ fn build_json(b: &Built, data: &Dataset, out: &std::path::Path, total: f64) -> s
         "exact_samples": r.exact,
         "sample_bytes": marionette_core::table::SAMPLE_LEN,
         "quantization": r.quant,
+        "reconstruction": r.reconstruction,
         "seconds": {
             "import": r.seconds[0], "cross_validation": r.seconds[1],
             "resampling": r.seconds[2], "writing": r.seconds[3], "total": total,
