@@ -106,7 +106,7 @@ impl Residual {
     #[must_use]
     pub fn magnitude(&self) -> f32 {
         match *self {
-            Residual::Position(d) | Residual::Orientation(d) => math::length(d),
+            Residual::Position(d) | Residual::Orientation(d) => norm(d),
             Residual::Plane { correction, .. } => math::abs(correction),
         }
     }
@@ -277,12 +277,21 @@ impl Goal {
     }
 }
 
+/// `|v|` by [`math::rsqrt`] (a few ulp; the exactly rounded [`math::length`]
+/// needs `f64` arithmetic, which is soft-float on the Cortex-M4F).
+#[inline]
+#[must_use]
+pub fn norm(v: Vec3) -> f32 {
+    let s = v.length_squared();
+    if s > 0.0 { s * math::rsqrt(s) } else { 0.0 }
+}
+
 /// The rotation vector (axis × angle, angle in [0, π]) of a unit quaternion.
 #[must_use]
 pub fn rotation_vector(q: Quat) -> Vec3 {
     let q = if q.w < 0.0 { -q } else { q };
     let v = q.xyz();
-    let s = math::length(v);
+    let s = norm(v);
     if s < 1e-6 {
         // sin(θ/2) ≈ θ/2: the vector part is half the rotation vector.
         return v * 2.0;

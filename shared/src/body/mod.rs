@@ -67,6 +67,20 @@ impl Axis {
         }
     }
 
+    /// `q · R(angle)`, the product with a rotation about this axis, in 8
+    /// multiplications instead of a general quaternion product's 16.
+    #[inline]
+    #[must_use]
+    pub fn rotate_after(self, q: Quat, angle: f32) -> Quat {
+        let (s, c) = math::sin_cos(0.5 * angle);
+        let (x, y, z, w) = (q.x, q.y, q.z, q.w);
+        match self {
+            Axis::X => Quat::from_xyzw(x * c + w * s, y * c + z * s, z * c - y * s, w * c - x * s),
+            Axis::Y => Quat::from_xyzw(x * c - z * s, y * c + w * s, z * c + x * s, w * c - y * s),
+            Axis::Z => Quat::from_xyzw(x * c + y * s, y * c - x * s, z * c + w * s, w * c - z * s),
+        }
+    }
+
     /// The component of `v` along this axis.
     #[inline]
     #[must_use]
@@ -220,13 +234,12 @@ impl Joint {
     }
 
     /// The joint's rotation relative to its parent for these angles
-    /// (unused entries are ignored).
+    /// (unused entries are ignored): `R_a(θ₀)·R_b(θ₁)·R_c(θ₂)`.
     #[must_use]
     pub fn rotation(&self, values: &[f32; 3]) -> Quat {
-        self.dofs()
-            .iter()
-            .zip(values)
-            .fold(Quat::IDENTITY, |q, (d, &v)| q * d.axis.rotation(v))
+        let mut dofs = self.dofs().iter().zip(values);
+        let Some((first, &v)) = dofs.next() else { return Quat::IDENTITY };
+        dofs.fold(first.axis.rotation(v), |q, (d, &v)| d.axis.rotate_after(q, v))
     }
 
     /// `values` clamped to the limits; unused entries set to 0.
@@ -696,6 +709,18 @@ mod tests {
         assert!((q * Vec3::Y - Vec3::Z).length_squared() < 1e-10);
         let q = Axis::Y.rotation(core::f32::consts::FRAC_PI_2);
         assert!((q * Vec3::Z - Vec3::X).length_squared() < 1e-10);
+    }
+
+    #[test]
+    fn rotate_after_is_the_quaternion_product() {
+        let q = Quat::from_xyzw(0.1, -0.7, 0.3, 0.64);
+        for axis in [Axis::X, Axis::Y, Axis::Z] {
+            for angle in [-2.0, 0.3, 1.7] {
+                let a = axis.rotate_after(q, angle);
+                let b = q * axis.rotation(angle);
+                assert!((a - b).length() < 1e-6, "{axis:?} {angle}: {a} vs {b}");
+            }
+        }
     }
 
     #[test]

@@ -24,7 +24,6 @@
 
 use super::{Chain, Method, ReachTree, RootMode, SolveError, Solver, Work, ccd, dls, greedy};
 use crate::goal::{Frame, Target};
-use crate::math;
 use glam::{Quat, Vec3};
 
 /// Balances the whole reach tree; returns (iterations, converged).
@@ -54,7 +53,7 @@ impl<const N: usize> Balance<'_, '_, N> {
         let (mut stwd, mut stweight) = self.displacement(work, node, seg, depth)?;
         let mut count = 0u16;
         loop {
-            let prev = math::length(stwd);
+            let prev = crate::goal::norm(stwd);
             if stweight <= 0.0 || prev <= self.solver.tolerance * stweight {
                 break;
             }
@@ -70,7 +69,7 @@ impl<const N: usize> Balance<'_, '_, N> {
             }
             self.iterations = self.iterations.saturating_add(1);
             (stwd, stweight) = self.displacement(work, node, seg, depth)?;
-            if math::length(stwd) >= prev {
+            if crate::goal::norm(stwd) >= prev {
                 break;
             }
         }

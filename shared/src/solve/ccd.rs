@@ -26,9 +26,10 @@ pub(super) fn solve_chain<const N: usize>(
         for seg in chain.segments().rev() {
             let (Some(parent), Some(s)) = (work.body.parent(seg), work.body.segment(seg)) else { continue };
             let rp = work.pose.rotations.get(parent).copied().unwrap_or(Quat::IDENTITY);
+            let rs = work.pose.rotations.get(seg).copied().unwrap_or(Quat::IDENTITY);
             let p = work.pose.positions.get(seg).copied().unwrap_or(Vec3::ZERO);
             let Some(values) = work.angles.get_mut(seg) else { continue };
-            let axes = world_axes(&s.joint, values, rp);
+            let axes = world_axes(&s.joint, values, rp, rs);
             for ((v, dof), &w) in values.iter_mut().zip(s.joint.dofs()).zip(&axes).rev() {
                 let (re, rt) = (e - p, target - p);
                 let ep = re - w * w.dot(re);
@@ -47,19 +48,22 @@ pub(super) fn solve_chain<const N: usize>(
     Ok(())
 }
 
-/// World axes of a joint's DOFs, given the parent's world rotation: the axis of
-/// DOF `k` is `R_parent · R_0 ⋯ R_{k−1} · axis_k`.
-pub(super) fn world_axes(joint: &Joint, values: &[f32; 3], parent: Quat) -> [Vec3; 3] {
-    let mut out = [Vec3::ZERO; 3];
-    let mut q = parent;
-    let last = joint.count().saturating_sub(1);
-    for (k, ((o, d), &v)) in out.iter_mut().zip(joint.dofs()).zip(values).enumerate() {
-        *o = q * d.axis.unit();
-        if k < last {
-            q *= d.axis.rotation(v);
-        }
+/// World axes of a joint's DOFs, given the parent's and the segment's world
+/// rotations: the axis of DOF `k` is `R_parent · R_0 ⋯ R_{k−1} · axis_k`. The
+/// first is `R_parent · axis_0`, the last `R_segment · axis_last` (a rotation
+/// leaves its own axis fixed), so only a middle DOF needs a rotation built
+/// (one `sin_cos`).
+pub(super) fn world_axes(joint: &Joint, values: &[f32; 3], parent: Quat, segment: Quat) -> [Vec3; 3] {
+    match joint.dofs() {
+        [a] => [segment * a.axis.unit(), Vec3::ZERO, Vec3::ZERO],
+        [a, b] => [parent * a.axis.unit(), segment * b.axis.unit(), Vec3::ZERO],
+        [a, b, c] => [
+            parent * a.axis.unit(),
+            parent * (a.axis.rotation(values[0]) * b.axis.unit()),
+            segment * c.axis.unit(),
+        ],
+        _ => [Vec3::ZERO; 3],
     }
-    out
 }
 
 /// The rotation by `angle` about the unit axis `w`.

@@ -53,13 +53,13 @@ fn step<const N: usize>(work: &mut Work<'_, '_, N>, chain: &Chain<N>, k: usize, 
     let Some(seg) = chain.segments().nth(k) else { return Ok(()) };
     let p = point(work, chain, k, end);
     let next = point(work, chain, k + 1, end);
-    let a = math::length(next - p);
+    let a = crate::goal::norm(next - p);
     let to_target = target - p;
-    let c = math::length(to_target);
+    let c = crate::goal::norm(to_target);
     if a < 1e-6 || c < 1e-9 {
         return Ok(());
     }
-    let b: f32 = (k + 1..chain.len()).map(|j| math::length(point(work, chain, j + 1, end) - point(work, chain, j, end))).sum();
+    let b: f32 = (k + 1..chain.len()).map(|j| crate::goal::norm(point(work, chain, j + 1, end) - point(work, chain, j, end))).sum();
     let d = to_target / c;
     let u = (next - p) / a;
     let w = if c >= a + b || c <= a - b {

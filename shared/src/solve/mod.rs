@@ -42,13 +42,14 @@ mod ccd;
 mod dls;
 mod greedy;
 mod reach;
+mod tree;
 
-pub use dls::MAX_ROWS;
+pub use tree::MAX_GOALS;
 pub use reach::ReachTree;
 
 use crate::body::{Angles, Body, BodyError};
 use crate::goal::{Frame, Goal, GoalSet, Residual};
-use crate::pose::{LocalPose, MAX_SEGMENTS, Pose};
+use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
 use glam::Vec3;
 
 /// Which algorithm positions the body.
@@ -157,8 +158,8 @@ pub enum SolveError {
     Capacity,
     /// Goal `i` names a segment that does not exist, or has a NaN weight.
     BadGoal(u8),
-    /// The active goals need more least-squares rows than [`MAX_ROWS`].
-    TooManyRows,
+    /// [`Method::TreeDls`]: more active goals than [`MAX_GOALS`].
+    TooManyGoals,
 }
 
 impl From<BodyError> for SolveError {
@@ -196,7 +197,7 @@ pub fn solve<const N: usize, const G: usize>(
         (0, true)
     } else {
         match solver.method {
-            Method::TreeDls => dls::solve_tree(solver, &tree, &mut work)?,
+            Method::TreeDls => tree::solve(solver, &tree, &mut work)?,
             Method::Greedy | Method::Ccd | Method::Dls => balance::solve(solver, &tree, &mut work)?,
         }
     };
@@ -248,7 +249,8 @@ pub(crate) struct Work<'w, 'b, const N: usize> {
 
 impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
     fn new(body: &'w Body<'b>, goals: &'w [Goal], angles: &'w mut Angles<N>, pose: &'w mut Pose<N>) -> Result<Self, SolveError> {
-        body.validate()?;
+        // The body's structure is checked by `pose::forward` (parents before
+        // children, matching slices); its joints by `Body::validate`, once.
         if body.len() > N || body.len() > MAX_SEGMENTS {
             return Err(SolveError::Capacity);
         }
@@ -273,6 +275,20 @@ impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
     /// Recomputes the world pose from the angles (the one forward kinematics).
     pub fn forward(&mut self) -> Result<(), SolveError> {
         self.angles.forward(self.body, &mut self.local, self.pose)?;
+        Ok(())
+    }
+
+    /// Recomputes the world pose after only the joints of the segments in
+    /// `mask` (bit `i` = segment `i`) and the root placement changed: their
+    /// joint rotations are rebuilt from the angles, the others are reused.
+    pub fn forward_segments(&mut self, mask: u64) -> Result<(), SolveError> {
+        self.local.root_position = self.angles.root_position;
+        for (i, ((r, v), s)) in self.local.rotations.iter_mut().zip(&self.angles.values).zip(self.body.segments).enumerate().skip(1) {
+            if mask >> i & 1 != 0 {
+                *r = s.joint.rotation(v);
+            }
+        }
+        pose::forward(&self.body.hierarchy(), &self.local, self.pose).map_err(|e| SolveError::Body(BodyError::Pose(e)))?;
         Ok(())
     }
 

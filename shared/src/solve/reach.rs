@@ -20,6 +20,10 @@ pub struct ReachTree<const N: usize = MAX_SEGMENTS> {
     segment: [u8; N],
     parent: [u8; N],
     node_of: [u8; N],
+    /// Bit `s`: segment `s` is a node or an ancestor of one.
+    on_path: u64,
+    /// Per segment: bit mask of its ancestors and itself.
+    ancestry: [u64; N],
 }
 
 impl<const N: usize> ReachTree<N> {
@@ -57,7 +61,23 @@ impl<const N: usize> ReachTree<N> {
                 }
             }
         }
-        let mut tree = ReachTree { len: 0, segment: [0; N], parent: [NO_PARENT; N], node_of: [NO_PARENT; N] };
+        let mut tree = ReachTree {
+            len: 0,
+            segment: [0; N],
+            parent: [NO_PARENT; N],
+            node_of: [NO_PARENT; N],
+            on_path: 0,
+            ancestry: [0; N],
+        };
+        for s in 0..n {
+            let up = body.parent(s).and_then(|p| tree.ancestry.get(p).copied()).unwrap_or(0);
+            if let Some(a) = tree.ancestry.get_mut(s) {
+                *a = up | bit(s);
+            }
+            if holds.get(s).copied().unwrap_or(false) {
+                tree.on_path |= bit(s);
+            }
+        }
         for s in 0..n {
             let is_node = has_goal.get(s).copied().unwrap_or(false) || goal_children.get(s).copied().unwrap_or(0) >= 2;
             if is_node {
@@ -142,14 +162,24 @@ impl<const N: usize> ReachTree<N> {
     /// linkage above the reach-tree root is not changed), or `anchor` itself
     /// (e.g. the body root, whose chain to the reach-tree root is then solved).
     #[must_use]
-    pub fn moves(&self, body: &Body<'_>, segment: usize, anchor: Option<usize>) -> bool {
-        let Some(root) = self.root_segment() else { return false };
-        let below_anchor = match anchor {
-            Some(a) => a != segment && body.is_ancestor_or_self(a, segment),
-            None => root != segment && body.is_ancestor_or_self(root, segment),
-        };
-        below_anchor && (0..self.len).filter_map(|n| self.segment(n)).any(|s| body.is_ancestor_or_self(segment, s))
+    pub fn moves(&self, segment: usize, anchor: Option<usize>) -> bool {
+        let Some(anchor) = anchor.or_else(|| self.root_segment()) else { return false };
+        let below = segment != anchor && self.ancestry.get(segment).is_some_and(|a| a & bit(anchor) != 0);
+        below && self.on_path & bit(segment) != 0
     }
+
+    /// Bit mask of the ancestors of `segment` and itself.
+    #[must_use]
+    pub fn ancestry(&self, segment: usize) -> u64 {
+        self.ancestry.get(segment).copied().unwrap_or(0)
+    }
+}
+
+/// The bit of segment `s` in a 64-bit mask (0 beyond 63).
+#[inline]
+#[must_use]
+pub fn bit(s: usize) -> u64 {
+    1u64.checked_shl(u32::try_from(s).unwrap_or(64)).unwrap_or(0)
 }
 
 #[cfg(test)]
@@ -195,8 +225,8 @@ mod tests {
         assert_eq!(t.node_of(2), None);
         assert_eq!(children(&t, 1), ([2, 3, 0, 0], 2));
         // F's subtree moves with the chain B..E but F's own joint is not solved.
-        assert!(t.moves(&BODY, 2, None) && t.moves(&BODY, 4, None) && !t.moves(&BODY, 5, None));
-        assert!(!t.moves(&BODY, 0, None));
+        assert!(t.moves(2, None) && t.moves(4, None) && !t.moves(5, None));
+        assert!(!t.moves(0, None));
     }
 
     #[test]
@@ -205,7 +235,7 @@ mod tests {
         let t = ReachTree::<8>::build(&BODY, &goals).unwrap();
         assert_eq!((t.len(), t.root_segment()), (1, Some(6)));
         // The root's chain to the body root (anchor 0) is movable.
-        assert!(t.moves(&BODY, 1, Some(0)) && t.moves(&BODY, 3, Some(0)) && !t.moves(&BODY, 2, Some(0)));
+        assert!(t.moves(1, Some(0)) && t.moves(3, Some(0)) && !t.moves(2, Some(0)));
         assert_eq!(ReachTree::<8>::build(&BODY, &[Goal::reach(9, Vec3::ZERO, 1.0)]), Err(SolveError::BadGoal(0)));
         assert!(ReachTree::<8>::build(&BODY, &[]).unwrap().is_empty());
     }
