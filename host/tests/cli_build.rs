@@ -144,6 +144,40 @@ fn tiny_example_set_builds_and_synthesizes_its_examples_back() {
 }
 
 #[test]
+fn examples_export_round_trips_the_contract() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("tiny.json");
+    std::fs::write(&set, tiny_set().to_string()).unwrap();
+    let out = dir.path().join("out.json");
+    ok(&["build", s(&set), "--examples-out", s(&out), "--quiet"]);
+    let back: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let orig = tiny_set();
+    assert_eq!(
+        keys(&back),
+        BTreeSet::from(["segments", "axes", "examples"])
+    );
+    assert_eq!(back["segments"], orig["segments"]);
+    assert_eq!(back["examples"].as_array().unwrap().len(), 8);
+    for (b, o) in back["examples"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(orig["examples"].as_array().unwrap())
+    {
+        assert_eq!(keys(b), BTreeSet::from(["params", "pose"]));
+        assert_eq!(b["params"], o["params"]);
+        let (bp, op) = (b["pose"].as_array().unwrap(), o["pose"].as_array().unwrap());
+        for (x, y) in bp
+            .iter()
+            .flat_map(|v| v.as_array().unwrap())
+            .zip(op.iter().flat_map(|v| v.as_array().unwrap()))
+        {
+            assert!((x.as_f64().unwrap() - y.as_f64().unwrap()).abs() < 1e-12);
+        }
+    }
+}
+
+#[test]
 fn synth_json_has_exactly_the_contract_keys() {
     let dir = tempfile::tempdir().unwrap();
     let blob = build_tiny(dir.path());

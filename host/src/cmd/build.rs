@@ -315,6 +315,7 @@ fn holdout_text(rows: &[measure::Holdout]) -> String {
     let opt = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), mm);
     let mut all_probe = Vec::new();
     let mut all_joint = Vec::new();
+    let mut all_solved = Vec::new();
     for r in rows {
         let _ = writeln!(
             s,
@@ -333,13 +334,16 @@ fn holdout_text(rows: &[measure::Holdout]) -> String {
         }
         all_probe.extend(r.median_probe);
         all_joint.push(r.mean_joint);
+        all_solved.extend(r.solved.map(|x| x.mean_joint));
     }
     if rows.len() > 1 {
+        let mean = |v: &[f64]| (!v.is_empty()).then(|| build::resample::mean(v));
         let _ = writeln!(
             s,
-            "  mean over clips: hand median {}, per-joint mean {}",
-            opt((!all_probe.is_empty()).then(|| build::resample::mean(&all_probe))),
-            mm(build::resample::mean(&all_joint))
+            "  mean over clips: hand median {}, per-joint mean {}, per-joint after solving {}",
+            opt(mean(&all_probe)),
+            mm(build::resample::mean(&all_joint)),
+            opt(mean(&all_solved))
         );
     }
     s

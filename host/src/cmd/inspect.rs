@@ -29,7 +29,14 @@ pub struct Args {
     pub json: bool,
 }
 
-/// Reads a blob file and parses it with the core reader.
+/// An `f32` as the `f64` of its shortest decimal form (0.4, not
+/// 0.4000000059604645), so JSON shows what the table stores.
+#[must_use]
+pub fn short(x: f32) -> f64 {
+    x.to_string().parse().unwrap_or(f64::from(x))
+}
+
+/// Reads a blob file.
 pub fn read_blob(path: &std::path::Path) -> Result<Vec<u8>, CmdError> {
     std::fs::read(path).map_err(|e| format!("{}: cannot read: {e}", path.display()).into())
 }
@@ -60,7 +67,7 @@ pub fn describe(t: &Table<'_>) -> serde_json::Value {
                 Wrap::Cyclic { period } => (a.min + period, true),
             };
             json!({
-                "name": a.name().unwrap_or(""), "min": a.min, "max": max, "step": a.step,
+                "name": a.name().unwrap_or(""), "min": short(a.min), "max": short(max), "step": short(a.step),
                 "count": a.count, "cyclic": cyclic,
                 "cubic": a.interp == marionette_core::table::Interp::CatmullRom,
             })
@@ -81,8 +88,8 @@ pub fn describe(t: &Table<'_>) -> serde_json::Value {
             .flat_map(|i| (0..usize::from(p)).filter_map(move |k| t.duration(i, k)))
             .collect();
         json!({
-            "min": all.iter().copied().fold(f32::INFINITY, f32::min),
-            "max": all.iter().copied().fold(0.0_f32, f32::max),
+            "min": short(all.iter().copied().fold(f32::INFINITY, f32::min)),
+            "max": short(all.iter().copied().fold(0.0_f32, f32::max)),
         })
     });
     json!({
@@ -106,9 +113,9 @@ pub fn describe(t: &Table<'_>) -> serde_json::Value {
             "durations": h.durations.len,
             "crc": marionette_core::table::CRC_LEN,
         },
-        "position_scale": h.position_scale,
-        "position_bound_m": h.position_bound,
-        "rotation_bound_rad": h.rotation_bound,
+        "position_scale": short(h.position_scale),
+        "position_bound_m": short(h.position_bound),
+        "rotation_bound_rad": short(h.rotation_bound),
         "durations": durations,
     })
 }

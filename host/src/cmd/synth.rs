@@ -16,6 +16,7 @@ use marionette_core::table::Table;
 use serde_json::json;
 
 use super::CmdError;
+use super::inspect::short;
 use crate::build::query::{self, Synth};
 
 /// Arguments of `marionette synth`.
@@ -71,14 +72,16 @@ pub fn to_json(table: &Table<'_>, s: &Synth) -> serde_json::Value {
         .iter()
         .enumerate()
         .map(|(i, (p, q))| {
+            let position = [p.x, p.y, p.z].map(short);
+            let rotation = [q.w, q.x, q.y, q.z].map(short);
             json!({
                 "name": table.segment_name(i).unwrap_or(""),
-                "position": [p.x, p.y, p.z],
-                "rotation": [q.w, q.x, q.y, q.z],
+                "position": position,
+                "rotation": rotation,
             })
         })
         .collect();
-    json!({ "segments": segments, "duration": s.duration })
+    json!({ "segments": segments, "duration": s.duration.map(short) })
 }
 
 fn text(table: &Table<'_>, s: &Synth) -> String {
