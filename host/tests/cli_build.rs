@@ -178,6 +178,31 @@ fn examples_export_round_trips_the_contract() {
 }
 
 #[test]
+fn holdout_reports_each_held_out_group() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("tiny.json");
+    std::fs::write(&set, tiny_set().to_string()).unwrap();
+    // Example 6 (params 0.2, 0.1) held out: the other seven build the table.
+    let out: Value = serde_json::from_str(&ok(&[
+        "build",
+        s(&set),
+        "--holdout",
+        "examples[6]",
+        "--json",
+        "--quiet",
+    ]))
+    .unwrap();
+    let rows = out["holdout"].as_array().unwrap();
+    assert_eq!(rows.len(), 1);
+    assert_eq!(rows[0]["clip"], "examples[6]");
+    assert_eq!(rows[0]["examples"], 1);
+    let e = rows[0]["mean_joint"].as_f64().unwrap();
+    assert!(e.is_finite() && e >= 0.0, "{e}");
+    let e = fails(&["build", s(&set), "--holdout", "nothing"]);
+    assert!(e.contains("no clip matches"), "{e}");
+}
+
+#[test]
 fn synth_json_has_exactly_the_contract_keys() {
     let dir = tempfile::tempdir().unwrap();
     let blob = build_tiny(dir.path());

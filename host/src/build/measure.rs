@@ -31,7 +31,7 @@ use marionette_core::goal::{Goal, GoalSet};
 use marionette_core::grid::{Adjust, SliceSamples};
 use marionette_core::pose::{self, LocalPose, Pose};
 use marionette_core::solve::{self, Solver};
-use marionette_core::table::{Kind, Table, Wrap};
+use marionette_core::table::{Table, Wrap};
 use serde::Serialize;
 
 use super::error::BuildError;
@@ -402,13 +402,4 @@ fn solve_body(
             .collect(),
         scalars: Vec::new(),
     })
-}
-
-/// The table kind as a word.
-#[must_use]
-pub fn kind_name(kind: Kind) -> &'static str {
-    match kind {
-        Kind::Grid => "grid",
-        Kind::Clips { .. } => "clips",
-    }
 }
