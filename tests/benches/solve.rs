@@ -30,7 +30,10 @@ type A = Angles<N>;
 struct Lcg(u64);
 impl Lcg {
     fn unit(&mut self) -> f32 {
-        self.0 = self.0.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        self.0 = self
+            .0
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
         (self.0 >> 40) as f32 / (1u64 << 23) as f32 - 1.0
     }
     fn vec(&mut self) -> Vec3 {
@@ -49,7 +52,9 @@ fn touch(body: &Body<'_>, a: &A, seg: u8) -> Vec3 {
     let mut local = LocalPose::<N>::default();
     let mut pose = Pose::<N>::default();
     a.forward(body, &mut local, &mut pose).expect("forward");
-    Goal::reach(seg, Vec3::ZERO, 1.0).world_point(body, &pose).expect("touch point")
+    Goal::reach(seg, Vec3::ZERO, 1.0)
+        .world_point(body, &pose)
+        .expect("touch point")
 }
 
 fn problems() -> Vec<Problem> {
@@ -69,7 +74,12 @@ fn problems() -> Vec<Problem> {
                 }
             }
             let mut goals = GoalSet::<4>::new();
-            for seg in [cmu::index::LEFT_HAND, cmu::index::RIGHT_HAND, cmu::index::LEFT_FOOT, cmu::index::RIGHT_FOOT] {
+            for seg in [
+                cmu::index::LEFT_HAND,
+                cmu::index::RIGHT_HAND,
+                cmu::index::LEFT_FOOT,
+                cmu::index::RIGHT_FOOT,
+            ] {
                 let at = touch(body, &truth, seg) + rng.vec() * (0.03 / 3f32.sqrt());
                 goals.push(Goal::reach(seg, at, 1.0)).expect("capacity");
             }
@@ -81,17 +91,28 @@ fn problems() -> Vec<Problem> {
             }
             let mut rest = A::rest(body).expect("rest");
             rest.root_position = root;
-            Problem { synth, rest, goals, moved }
+            Problem {
+                synth,
+                rest,
+                goals,
+                moved,
+            }
         })
         .collect()
 }
 
 fn solver(method: Method) -> Solver {
-    Solver::DEFAULT.with_method(method).with_root(RootMode::Fixed)
+    Solver::DEFAULT
+        .with_method(method)
+        .with_root(RootMode::Fixed)
 }
 
-const METHODS: [(Method, &str); 4] =
-    [(Method::Greedy, "Greedy (paper)"), (Method::Ccd, "CCD"), (Method::Dls, "Chain DLS"), (Method::TreeDls, "Tree DLS (default)")];
+const METHODS: [(Method, &str); 4] = [
+    (Method::Greedy, "Greedy (paper)"),
+    (Method::Ccd, "CCD"),
+    (Method::Dls, "Chain DLS"),
+    (Method::TreeDls, "Tree DLS (default)"),
+];
 
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Scenario {
@@ -123,14 +144,32 @@ fn once(method: Method, start: &A, goals: &GoalSet<4>) -> (A, marionette_core::s
 
 /// The README table: one row per method and scenario.
 fn table(problems: &[Problem]) {
-    println!("\n| method | start | mean residual (mm) | max residual (mm) | all goals ≤ 0.1 mm | error / best | iterations | host µs/solve |");
+    println!(
+        "\n| method | start | mean residual (mm) | max residual (mm) | all goals ≤ 0.1 mm | error / best | iterations | host µs/solve |"
+    );
     println!("|---|---|---|---|---|---|---|---|");
-    for (scenario, label) in [(Scenario::Synth, "cold, synthesized"), (Scenario::Rest, "cold, rest"), (Scenario::Warm, "warm (≤ 2 cm)")] {
-        let all: Vec<Vec<(A, GoalSet<4>)>> = METHODS.iter().map(|&(m, _)| cases(m, scenario, problems)).collect();
-        let reports: Vec<Vec<marionette_core::solve::Report<4>>> =
-            METHODS.iter().zip(&all).map(|(&(m, _), cs)| cs.iter().map(|(a, g)| once(m, a, g).1).collect()).collect();
-        let best: Vec<f32> =
-            (0..problems.len()).map(|i| reports.iter().map(|r| r[i].error).fold(f32::INFINITY, f32::min)).collect();
+    for (scenario, label) in [
+        (Scenario::Synth, "cold, synthesized"),
+        (Scenario::Rest, "cold, rest"),
+        (Scenario::Warm, "warm (≤ 2 cm)"),
+    ] {
+        let all: Vec<Vec<(A, GoalSet<4>)>> = METHODS
+            .iter()
+            .map(|&(m, _)| cases(m, scenario, problems))
+            .collect();
+        let reports: Vec<Vec<marionette_core::solve::Report<4>>> = METHODS
+            .iter()
+            .zip(&all)
+            .map(|(&(m, _), cs)| cs.iter().map(|(a, g)| once(m, a, g).1).collect())
+            .collect();
+        let best: Vec<f32> = (0..problems.len())
+            .map(|i| {
+                reports
+                    .iter()
+                    .map(|r| r[i].error)
+                    .fold(f32::INFINITY, f32::min)
+            })
+            .collect();
         for ((&(method, name), cs), rs) in METHODS.iter().zip(&all).zip(&reports) {
             let (mut sum, mut max, mut met, mut its, mut ratio) = (0.0f32, 0.0f32, 0, 0u32, 0.0f32);
             for (r, b) in rs.iter().zip(&best) {
@@ -170,9 +209,16 @@ fn benches(c: &mut Criterion) {
     let problems = problems();
     table(&problems);
     let mut group = c.benchmark_group("solve");
-    group.sample_size(20).measurement_time(Duration::from_secs(2)).warm_up_time(Duration::from_millis(500));
+    group
+        .sample_size(20)
+        .measurement_time(Duration::from_secs(2))
+        .warm_up_time(Duration::from_millis(500));
     for &(method, _) in &METHODS {
-        for (scenario, label) in [(Scenario::Synth, "cold-synth"), (Scenario::Rest, "cold-rest"), (Scenario::Warm, "warm")] {
+        for (scenario, label) in [
+            (Scenario::Synth, "cold-synth"),
+            (Scenario::Rest, "cold-rest"),
+            (Scenario::Warm, "warm"),
+        ] {
             let cs = cases(method, scenario, &problems);
             group.bench_function(format!("{label}/{method:?}"), |b| {
                 let mut i = 0;

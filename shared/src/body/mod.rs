@@ -238,8 +238,12 @@ impl Joint {
     #[must_use]
     pub fn rotation(&self, values: &[f32; 3]) -> Quat {
         let mut dofs = self.dofs().iter().zip(values);
-        let Some((first, &v)) = dofs.next() else { return Quat::IDENTITY };
-        dofs.fold(first.axis.rotation(v), |q, (d, &v)| d.axis.rotate_after(q, v))
+        let Some((first, &v)) = dofs.next() else {
+            return Quat::IDENTITY;
+        };
+        dofs.fold(first.axis.rotation(v), |q, (d, &v)| {
+            d.axis.rotate_after(q, v)
+        })
     }
 
     /// `values` clamped to the limits; unused entries set to 0.

@@ -32,7 +32,12 @@ pub(super) fn solve<const N: usize>(
     tree: &ReachTree<N>,
     work: &mut Work<'_, '_, N>,
 ) -> Result<(u32, bool), SolveError> {
-    let mut b = Balance { solver, tree, iterations: 0, capped: false };
+    let mut b = Balance {
+        solver,
+        tree,
+        iterations: 0,
+        capped: false,
+    };
     b.balance(work, 0, 0)?;
     Ok((b.iterations, !b.capped))
 }
@@ -46,7 +51,12 @@ struct Balance<'s, 't, const N: usize> {
 
 impl<const N: usize> Balance<'_, '_, N> {
     /// Balances the subtree of `node`; returns its (stwd, stweight).
-    fn balance(&mut self, work: &mut Work<'_, '_, N>, node: usize, depth: usize) -> Result<(Vec3, f32), SolveError> {
+    fn balance(
+        &mut self,
+        work: &mut Work<'_, '_, N>,
+        node: usize,
+        depth: usize,
+    ) -> Result<(Vec3, f32), SolveError> {
         let Some(seg) = self.tree.segment(node).filter(|_| depth <= N) else {
             return Ok((Vec3::ZERO, 0.0));
         };
@@ -79,7 +89,13 @@ impl<const N: usize> Balance<'_, '_, N> {
     /// Re-balances the children, applies the node's orientation goal, and sums
     /// the weighted displacements (Fig. 17's `clear_displacements`,
     /// `balance_children`, `get_approx_solution`).
-    fn displacement(&mut self, work: &mut Work<'_, '_, N>, node: usize, seg: usize, depth: usize) -> Result<(Vec3, f32), SolveError> {
+    fn displacement(
+        &mut self,
+        work: &mut Work<'_, '_, N>,
+        node: usize,
+        seg: usize,
+        depth: usize,
+    ) -> Result<(Vec3, f32), SolveError> {
         let tree = self.tree;
         let mut stwd = Vec3::ZERO;
         let mut stweight = 0.0;
@@ -89,7 +105,12 @@ impl<const N: usize> Balance<'_, '_, N> {
             stweight += w;
         }
         orient(work, seg)?;
-        for (g, i) in work.goals.iter().zip(0u8..).filter(|(g, _)| g.is_active() && g.is_positional()) {
+        for (g, i) in work
+            .goals
+            .iter()
+            .zip(0u8..)
+            .filter(|(g, _)| g.is_active() && g.is_positional())
+        {
             // A goal pulls its own segment towards the target and, if the target
             // is in another segment's frame, that segment the opposite way.
             let sign = if usize::from(g.segment) == seg {
@@ -99,7 +120,9 @@ impl<const N: usize> Balance<'_, '_, N> {
             } else {
                 continue;
             };
-            let r = g.evaluate(work.body, work.pose).ok_or(SolveError::BadGoal(i))?;
+            let r = g
+                .evaluate(work.body, work.pose)
+                .ok_or(SolveError::BadGoal(i))?;
             stwd += r.displacement() * (sign * g.weight);
             stweight += g.weight;
         }
@@ -108,8 +131,18 @@ impl<const N: usize> Balance<'_, '_, N> {
 
     /// Moves the node's touch point towards `target` (`shift` from where it is);
     /// returns false if nothing can move it.
-    fn move_node(&mut self, work: &mut Work<'_, '_, N>, node: usize, seg: usize, target: Vec3, shift: Vec3) -> Result<bool, SolveError> {
-        let top = match (self.tree.parent(node).and_then(|p| self.tree.segment(p)), self.solver.root) {
+    fn move_node(
+        &mut self,
+        work: &mut Work<'_, '_, N>,
+        node: usize,
+        seg: usize,
+        target: Vec3,
+        shift: Vec3,
+    ) -> Result<bool, SolveError> {
+        let top = match (
+            self.tree.parent(node).and_then(|p| self.tree.segment(p)),
+            self.solver.root,
+        ) {
             (Some(p), _) => Some(p),
             (None, RootMode::Fixed) => None,
             (None, RootMode::Float) => {
@@ -118,7 +151,8 @@ impl<const N: usize> Balance<'_, '_, N> {
                 return Ok(true);
             }
         };
-        let chain = Chain::<N>::between(work.body, top, seg, orientation_target(work, seg).is_some());
+        let chain =
+            Chain::<N>::between(work.body, top, seg, orientation_target(work, seg).is_some());
         if chain.len() == 0 {
             return Ok(false);
         }
@@ -126,7 +160,9 @@ impl<const N: usize> Balance<'_, '_, N> {
         match self.solver.method {
             Method::Greedy => greedy::solve_chain(work, &chain, seg, target, n)?,
             Method::Ccd => ccd::solve_chain(work, &chain, seg, target, n)?,
-            Method::Dls | Method::TreeDls => dls::solve_chain(self.solver, work, &chain, seg, target)?,
+            Method::Dls | Method::TreeDls => {
+                dls::solve_chain(self.solver, work, &chain, seg, target)?
+            }
         }
         Ok(true)
     }
@@ -139,11 +175,22 @@ fn orientation_target<const N: usize>(work: &Work<'_, '_, N>, seg: usize) -> Opt
         return None;
     }
     let mut best: Option<(f32, Quat)> = None;
-    for g in work.goals.iter().filter(|g| usize::from(g.segment) == seg && g.is_active()) {
+    for g in work
+        .goals
+        .iter()
+        .filter(|g| usize::from(g.segment) == seg && g.is_active())
+    {
         if let Target::Orientation(q) = g.target {
             let world = match g.frame {
                 Frame::World => q,
-                Frame::Segment(f) => work.pose.rotations.get(usize::from(f)).copied().unwrap_or(Quat::IDENTITY) * q,
+                Frame::Segment(f) => {
+                    work.pose
+                        .rotations
+                        .get(usize::from(f))
+                        .copied()
+                        .unwrap_or(Quat::IDENTITY)
+                        * q
+                }
             };
             if best.is_none_or(|(w, _)| g.weight > w) {
                 best = Some((g.weight, world));
@@ -155,9 +202,18 @@ fn orientation_target<const N: usize>(work: &Work<'_, '_, N>, seg: usize) -> Opt
 
 /// Sets a segment's own joint to its orientation goal (projected onto the DOFs).
 fn orient<const N: usize>(work: &mut Work<'_, '_, N>, seg: usize) -> Result<(), SolveError> {
-    let Some(target) = orientation_target(work, seg) else { return Ok(()) };
-    let (Some(parent), Some(s)) = (work.body.parent(seg), work.body.segment(seg)) else { return Ok(()) };
-    let rp = work.pose.rotations.get(parent).copied().unwrap_or(Quat::IDENTITY);
+    let Some(target) = orientation_target(work, seg) else {
+        return Ok(());
+    };
+    let (Some(parent), Some(s)) = (work.body.parent(seg), work.body.segment(seg)) else {
+        return Ok(());
+    };
+    let rp = work
+        .pose
+        .rotations
+        .get(parent)
+        .copied()
+        .unwrap_or(Quat::IDENTITY);
     let values = s.joint.project(rp.conjugate() * target);
     if let Some(v) = work.angles.get_mut(seg) {
         *v = values;

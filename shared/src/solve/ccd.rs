@@ -24,11 +24,25 @@ pub(super) fn solve_chain<const N: usize>(
     for _ in 0..passes.max(1) {
         let mut e = work.touch(end);
         for seg in chain.segments().rev() {
-            let (Some(parent), Some(s)) = (work.body.parent(seg), work.body.segment(seg)) else { continue };
-            let rp = work.pose.rotations.get(parent).copied().unwrap_or(Quat::IDENTITY);
-            let rs = work.pose.rotations.get(seg).copied().unwrap_or(Quat::IDENTITY);
+            let (Some(parent), Some(s)) = (work.body.parent(seg), work.body.segment(seg)) else {
+                continue;
+            };
+            let rp = work
+                .pose
+                .rotations
+                .get(parent)
+                .copied()
+                .unwrap_or(Quat::IDENTITY);
+            let rs = work
+                .pose
+                .rotations
+                .get(seg)
+                .copied()
+                .unwrap_or(Quat::IDENTITY);
             let p = work.pose.positions.get(seg).copied().unwrap_or(Vec3::ZERO);
-            let Some(values) = work.angles.get_mut(seg) else { continue };
+            let Some(values) = work.angles.get_mut(seg) else {
+                continue;
+            };
             let axes = world_axes(&s.joint, values, rp, rs);
             for ((v, dof), &w) in values.iter_mut().zip(s.joint.dofs()).zip(&axes).rev() {
                 let (re, rt) = (e - p, target - p);
@@ -53,7 +67,12 @@ pub(super) fn solve_chain<const N: usize>(
 /// first is `R_parent · axis_0`, the last `R_segment · axis_last` (a rotation
 /// leaves its own axis fixed), so only a middle DOF needs a rotation built
 /// (one `sin_cos`).
-pub(super) fn world_axes(joint: &Joint, values: &[f32; 3], parent: Quat, segment: Quat) -> [Vec3; 3] {
+pub(super) fn world_axes(
+    joint: &Joint,
+    values: &[f32; 3],
+    parent: Quat,
+    segment: Quat,
+) -> [Vec3; 3] {
     match joint.dofs() {
         [a] => [segment * a.axis.unit(), Vec3::ZERO, Vec3::ZERO],
         [a, b] => [parent * a.axis.unit(), segment * b.axis.unit(), Vec3::ZERO],

@@ -37,7 +37,11 @@ pub(super) fn solve_chain<const N: usize>(
         let mut cols = [[(Vec3::ZERO, 0.0f32); 3]; N];
         let mut a = [[0.0f32; 3]; 3];
         for (seg, col) in chain.segments().zip(cols.iter_mut()) {
-            let (Some(parent), Some(s), Some(v)) = (work.body.parent(seg), work.body.segment(seg), work.angles.get(seg)) else {
+            let (Some(parent), Some(s), Some(v)) = (
+                work.body.parent(seg),
+                work.body.segment(seg),
+                work.angles.get(seg),
+            ) else {
                 continue;
             };
             let rp = work.pose.rotations.get(parent).copied().unwrap_or_default();
@@ -65,8 +69,16 @@ pub(super) fn solve_chain<const N: usize>(
             break;
         }
         let y = Vec3::new(y[0], y[1], y[2]);
-        let biggest = cols.iter().take(chain.len()).flatten().fold(0.0f32, |m, (c, d)| m.max(math::abs(c.dot(y) * d)));
-        let scale = if biggest > MAX_STEP { MAX_STEP / biggest } else { 1.0 };
+        let biggest = cols
+            .iter()
+            .take(chain.len())
+            .flatten()
+            .fold(0.0f32, |m, (c, d)| m.max(math::abs(c.dot(y) * d)));
+        let scale = if biggest > MAX_STEP {
+            MAX_STEP / biggest
+        } else {
+            1.0
+        };
         for (seg, col) in chain.segments().zip(&cols) {
             let (Some(s), Some(v)) = (work.body.segment(seg), work.angles.get_mut(seg)) else {
                 continue;
@@ -101,21 +113,34 @@ fn add_outer(a: &mut [[f32; 3]; 3], j: Vec3, s: f32) {
 /// lower triangle read, overwritten by the Cholesky factor with `1/Lᵢᵢ` on the
 /// diagonal); `b` becomes `x`. Returns false if `A` is not numerically
 /// positive definite.
-pub(super) fn cholesky_solve<const M: usize>(a: &mut [[f32; M]; M], m: usize, b: &mut [f32; M]) -> bool {
+pub(super) fn cholesky_solve<const M: usize>(
+    a: &mut [[f32; M]; M],
+    m: usize,
+    b: &mut [f32; M],
+) -> bool {
     let m = m.min(M);
     // A = L·Lᵀ, row by row.
     for i in 0..m {
-        let Some((done, rest)) = a.split_at_mut_checked(i) else { return false };
-        let Some((left, diag)) = rest.first_mut().and_then(|row| row.split_at_mut_checked(i)) else { return false };
+        let Some((done, rest)) = a.split_at_mut_checked(i) else {
+            return false;
+        };
+        let Some((left, diag)) = rest.first_mut().and_then(|row| row.split_at_mut_checked(i))
+        else {
+            return false;
+        };
         for (j, row_j) in done.iter().enumerate() {
-            let Some((lk, tail)) = left.split_at_mut_checked(j) else { return false };
+            let Some((lk, tail)) = left.split_at_mut_checked(j) else {
+                return false;
+            };
             let dot: f32 = lk.iter().zip(row_j).map(|(x, y)| x * y).sum();
             if let (Some(x), Some(&inv)) = (tail.first_mut(), row_j.get(j)) {
                 *x = (*x - dot) * inv;
             }
         }
         let sq: f32 = left.iter().map(|x| x * x).sum();
-        let Some(d) = diag.first_mut() else { return false };
+        let Some(d) = diag.first_mut() else {
+            return false;
+        };
         let v = *d - sq;
         if v <= 1e-20 || v.is_nan() {
             return false;
@@ -124,7 +149,9 @@ pub(super) fn cholesky_solve<const M: usize>(a: &mut [[f32; M]; M], m: usize, b:
     }
     // L·z = b.
     for (i, row) in a.iter().enumerate().take(m) {
-        let Some((head, tail)) = b.split_at_mut_checked(i) else { return false };
+        let Some((head, tail)) = b.split_at_mut_checked(i) else {
+            return false;
+        };
         let s: f32 = row.iter().zip(head.iter()).map(|(l, z)| l * z).sum();
         if let (Some(x), Some(&inv)) = (tail.first_mut(), row.get(i)) {
             *x = (*x - s) * inv;
@@ -132,8 +159,12 @@ pub(super) fn cholesky_solve<const M: usize>(a: &mut [[f32; M]; M], m: usize, b:
     }
     // Lᵀ·x = z, column-oriented so that L is read by rows.
     for (i, row) in a.iter().enumerate().take(m).rev() {
-        let Some((head, tail)) = b.split_at_mut_checked(i) else { return false };
-        let (Some(x), Some(&inv)) = (tail.first_mut(), row.get(i)) else { return false };
+        let Some((head, tail)) = b.split_at_mut_checked(i) else {
+            return false;
+        };
+        let (Some(x), Some(&inv)) = (tail.first_mut(), row.get(i)) else {
+            return false;
+        };
         *x *= inv;
         let xi = *x;
         for (bk, l) in head.iter_mut().zip(row.iter()) {
@@ -142,4 +173,3 @@ pub(super) fn cholesky_solve<const M: usize>(a: &mut [[f32; M]; M], m: usize, b:
     }
     true
 }
-

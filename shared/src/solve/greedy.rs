@@ -49,8 +49,16 @@ fn point<const N: usize>(work: &Work<'_, '_, N>, chain: &Chain<N>, k: usize, end
 }
 
 /// One greedy step at the chain's `k`-th joint.
-fn step<const N: usize>(work: &mut Work<'_, '_, N>, chain: &Chain<N>, k: usize, end: usize, target: Vec3) -> Result<(), SolveError> {
-    let Some(seg) = chain.segments().nth(k) else { return Ok(()) };
+fn step<const N: usize>(
+    work: &mut Work<'_, '_, N>,
+    chain: &Chain<N>,
+    k: usize,
+    end: usize,
+    target: Vec3,
+) -> Result<(), SolveError> {
+    let Some(seg) = chain.segments().nth(k) else {
+        return Ok(());
+    };
     let p = point(work, chain, k, end);
     let next = point(work, chain, k + 1, end);
     let a = crate::goal::norm(next - p);
@@ -59,7 +67,9 @@ fn step<const N: usize>(work: &mut Work<'_, '_, N>, chain: &Chain<N>, k: usize, 
     if a < 1e-6 || c < 1e-9 {
         return Ok(());
     }
-    let b: f32 = (k + 1..chain.len()).map(|j| crate::goal::norm(point(work, chain, j + 1, end) - point(work, chain, j, end))).sum();
+    let b: f32 = (k + 1..chain.len())
+        .map(|j| crate::goal::norm(point(work, chain, j + 1, end) - point(work, chain, j, end)))
+        .sum();
     let d = to_target / c;
     let u = (next - p) / a;
     let w = if c >= a + b || c <= a - b {
@@ -75,7 +85,14 @@ fn step<const N: usize>(work: &mut Work<'_, '_, N>, chain: &Chain<N>, k: usize, 
 }
 
 /// The unit direction, perpendicular to `d`, of the current bending plane.
-fn bend_direction<const N: usize>(u: Vec3, d: Vec3, work: &Work<'_, '_, N>, chain: &Chain<N>, k: usize, end: usize) -> Vec3 {
+fn bend_direction<const N: usize>(
+    u: Vec3,
+    d: Vec3,
+    work: &Work<'_, '_, N>,
+    chain: &Chain<N>,
+    k: usize,
+    end: usize,
+) -> Vec3 {
     let perp = u - d * u.dot(d);
     if perp.length_squared() > 1e-8 {
         return math::normalize_vec3(perp);
@@ -86,16 +103,36 @@ fn bend_direction<const N: usize>(u: Vec3, d: Vec3, work: &Work<'_, '_, N>, chai
     if perp.length_squared() > 1e-8 {
         return math::normalize_vec3(perp);
     }
-    let other = if math::abs(d.x) < 0.6 { Vec3::X } else { Vec3::Y };
+    let other = if math::abs(d.x) < 0.6 {
+        Vec3::X
+    } else {
+        Vec3::Y
+    };
     math::normalize_vec3(d.cross(other))
 }
 
 /// Applies the world rotation `delta` to segment `seg` (about its joint),
 /// projected onto the joint's DOFs and clamped; recomputes the pose.
-fn turn<const N: usize>(work: &mut Work<'_, '_, N>, seg: usize, delta: Quat) -> Result<(), SolveError> {
-    let (Some(parent), Some(s)) = (work.body.parent(seg), work.body.segment(seg)) else { return Ok(()) };
-    let rp = work.pose.rotations.get(parent).copied().unwrap_or(Quat::IDENTITY);
-    let rs = work.pose.rotations.get(seg).copied().unwrap_or(Quat::IDENTITY);
+fn turn<const N: usize>(
+    work: &mut Work<'_, '_, N>,
+    seg: usize,
+    delta: Quat,
+) -> Result<(), SolveError> {
+    let (Some(parent), Some(s)) = (work.body.parent(seg), work.body.segment(seg)) else {
+        return Ok(());
+    };
+    let rp = work
+        .pose
+        .rotations
+        .get(parent)
+        .copied()
+        .unwrap_or(Quat::IDENTITY);
+    let rs = work
+        .pose
+        .rotations
+        .get(seg)
+        .copied()
+        .unwrap_or(Quat::IDENTITY);
     let values = s.joint.project(rp.conjugate() * (delta * rs));
     if let Some(v) = work.angles.get_mut(seg) {
         *v = values;

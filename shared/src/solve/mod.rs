@@ -44,8 +44,8 @@ mod greedy;
 mod reach;
 mod tree;
 
-pub use tree::MAX_GOALS;
 pub use reach::ReachTree;
+pub use tree::MAX_GOALS;
 
 use crate::body::{Angles, Body, BodyError};
 use crate::goal::{Frame, Goal, GoalSet, Residual};
@@ -201,9 +201,17 @@ pub fn solve<const N: usize, const G: usize>(
             Method::Greedy | Method::Ccd | Method::Dls => balance::solve(solver, &tree, &mut work)?,
         }
     };
-    let mut report = Report { iterations, converged, residuals: [0.0; G], error: 0.0 };
+    let mut report = Report {
+        iterations,
+        converged,
+        residuals: [0.0; G],
+        error: 0.0,
+    };
     for ((r, g), i) in report.residuals.iter_mut().zip(goals.as_slice()).zip(0u8..) {
-        *r = g.evaluate(body, work.pose).ok_or(SolveError::BadGoal(i))?.magnitude();
+        *r = g
+            .evaluate(body, work.pose)
+            .ok_or(SolveError::BadGoal(i))?
+            .magnitude();
         if g.is_active() {
             report.error += g.weight * *r * *r;
         }
@@ -248,7 +256,12 @@ pub(crate) struct Work<'w, 'b, const N: usize> {
 }
 
 impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
-    fn new(body: &'w Body<'b>, goals: &'w [Goal], angles: &'w mut Angles<N>, pose: &'w mut Pose<N>) -> Result<Self, SolveError> {
+    fn new(
+        body: &'w Body<'b>,
+        goals: &'w [Goal],
+        angles: &'w mut Angles<N>,
+        pose: &'w mut Pose<N>,
+    ) -> Result<Self, SolveError> {
         // The body's structure is checked by `pose::forward` (parents before
         // children, matching slices); its joints by `Body::validate`, once.
         if body.len() > N || body.len() > MAX_SEGMENTS {
@@ -267,7 +280,13 @@ impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
             }
         }
         angles.clamp_to_limits(body);
-        let mut w = Work { body, goals, angles, pose, local: LocalPose::default() };
+        let mut w = Work {
+            body,
+            goals,
+            angles,
+            pose,
+            local: LocalPose::default(),
+        };
         w.forward()?;
         Ok(w)
     }
@@ -283,20 +302,31 @@ impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
     /// joint rotations are rebuilt from the angles, the others are reused.
     pub fn forward_segments(&mut self, mask: u64) -> Result<(), SolveError> {
         self.local.root_position = self.angles.root_position;
-        for (i, ((r, v), s)) in self.local.rotations.iter_mut().zip(&self.angles.values).zip(self.body.segments).enumerate().skip(1) {
+        for (i, ((r, v), s)) in self
+            .local
+            .rotations
+            .iter_mut()
+            .zip(&self.angles.values)
+            .zip(self.body.segments)
+            .enumerate()
+            .skip(1)
+        {
             if mask >> i & 1 != 0 {
                 *r = s.joint.rotation(v);
             }
         }
-        pose::forward(&self.body.hierarchy(), &self.local, self.pose).map_err(|e| SolveError::Body(BodyError::Pose(e)))?;
+        pose::forward(&self.body.hierarchy(), &self.local, self.pose)
+            .map_err(|e| SolveError::Body(BodyError::Pose(e)))?;
         Ok(())
     }
 
     /// World position of a segment's touch point.
     pub fn touch(&self, segment: usize) -> Vec3 {
-        let (Some(&p), Some(&r), Some(s)) =
-            (self.pose.positions.get(segment), self.pose.rotations.get(segment), self.body.segment(segment))
-        else {
+        let (Some(&p), Some(&r), Some(s)) = (
+            self.pose.positions.get(segment),
+            self.pose.rotations.get(segment),
+            self.body.segment(segment),
+        ) else {
             return Vec3::ZERO;
         };
         p + r * s.touch

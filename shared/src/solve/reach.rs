@@ -51,7 +51,9 @@ impl<const N: usize> ReachTree<N> {
         let mut holds = has_goal;
         let mut goal_children = [0u8; N];
         for i in (1..n).rev() {
-            let (Some(p), Some(&h)) = (body.parent(i), holds.get(i)) else { continue };
+            let (Some(p), Some(&h)) = (body.parent(i), holds.get(i)) else {
+                continue;
+            };
             if h {
                 if let Some(c) = goal_children.get_mut(p) {
                     *c = c.saturating_add(1);
@@ -70,7 +72,10 @@ impl<const N: usize> ReachTree<N> {
             ancestry: [0; N],
         };
         for s in 0..n {
-            let up = body.parent(s).and_then(|p| tree.ancestry.get(p).copied()).unwrap_or(0);
+            let up = body
+                .parent(s)
+                .and_then(|p| tree.ancestry.get(p).copied())
+                .unwrap_or(0);
             if let Some(a) = tree.ancestry.get_mut(s) {
                 *a = up | bit(s);
             }
@@ -79,7 +84,8 @@ impl<const N: usize> ReachTree<N> {
             }
         }
         for s in 0..n {
-            let is_node = has_goal.get(s).copied().unwrap_or(false) || goal_children.get(s).copied().unwrap_or(0) >= 2;
+            let is_node = has_goal.get(s).copied().unwrap_or(false)
+                || goal_children.get(s).copied().unwrap_or(0) >= 2;
             if is_node {
                 tree.push(body, s);
             }
@@ -91,9 +97,11 @@ impl<const N: usize> ReachTree<N> {
     fn push(&mut self, body: &Body<'_>, s: usize) {
         let node = self.len;
         let parent = self.nearest_node_ancestor(body, s).unwrap_or(NO_PARENT);
-        if let (Some(seg), Some(par), Some(of)) =
-            (self.segment.get_mut(node), self.parent.get_mut(node), self.node_of.get_mut(s))
-        {
+        if let (Some(seg), Some(par), Some(of)) = (
+            self.segment.get_mut(node),
+            self.parent.get_mut(node),
+            self.node_of.get_mut(s),
+        ) {
             *seg = u8::try_from(s).unwrap_or(u8::MAX);
             *par = parent;
             *of = u8::try_from(node).unwrap_or(NO_PARENT);
@@ -128,19 +136,28 @@ impl<const N: usize> ReachTree<N> {
     /// The body segment of node `node`.
     #[must_use]
     pub fn segment(&self, node: usize) -> Option<usize> {
-        self.segment.get(node).filter(|_| node < self.len).map(|&s| usize::from(s))
+        self.segment
+            .get(node)
+            .filter(|_| node < self.len)
+            .map(|&s| usize::from(s))
     }
 
     /// The reach parent (a node index) of node `node`; `None` for the root.
     #[must_use]
     pub fn parent(&self, node: usize) -> Option<usize> {
-        self.parent.get(node).filter(|&&p| node < self.len && p != NO_PARENT).map(|&p| usize::from(p))
+        self.parent
+            .get(node)
+            .filter(|&&p| node < self.len && p != NO_PARENT)
+            .map(|&p| usize::from(p))
     }
 
     /// The node of a body segment, if it is one.
     #[must_use]
     pub fn node_of(&self, segment: usize) -> Option<usize> {
-        self.node_of.get(segment).filter(|&&n| n != NO_PARENT).map(|&n| usize::from(n))
+        self.node_of
+            .get(segment)
+            .filter(|&&n| n != NO_PARENT)
+            .map(|&n| usize::from(n))
     }
 
     /// The root node's segment: the topmost node (the lowest common ancestor of
@@ -153,7 +170,12 @@ impl<const N: usize> ReachTree<N> {
     /// The children (node indices) of node `node`.
     pub fn children(&self, node: usize) -> impl Iterator<Item = usize> + '_ {
         let lim = self.len;
-        self.parent.iter().take(lim).enumerate().filter(move |&(_, &p)| usize::from(p) == node).map(|(i, _)| i)
+        self.parent
+            .iter()
+            .take(lim)
+            .enumerate()
+            .filter(move |&(_, &p)| usize::from(p) == node)
+            .map(|(i, _)| i)
     }
 
     /// Whether the solver may move `segment`'s joint: it is an ancestor-or-self
@@ -163,8 +185,14 @@ impl<const N: usize> ReachTree<N> {
     /// (e.g. the body root, whose chain to the reach-tree root is then solved).
     #[must_use]
     pub fn moves(&self, segment: usize, anchor: Option<usize>) -> bool {
-        let Some(anchor) = anchor.or_else(|| self.root_segment()) else { return false };
-        let below = segment != anchor && self.ancestry.get(segment).is_some_and(|a| a & bit(anchor) != 0);
+        let Some(anchor) = anchor.or_else(|| self.root_segment()) else {
+            return false;
+        };
+        let below = segment != anchor
+            && self
+                .ancestry
+                .get(segment)
+                .is_some_and(|a| a & bit(anchor) != 0);
         below && self.on_path & bit(segment) != 0
     }
 
@@ -179,7 +207,8 @@ impl<const N: usize> ReachTree<N> {
 #[inline]
 #[must_use]
 pub fn bit(s: usize) -> u64 {
-    1u64.checked_shl(u32::try_from(s).unwrap_or(64)).unwrap_or(0)
+    1u64.checked_shl(u32::try_from(s).unwrap_or(64))
+        .unwrap_or(0)
 }
 
 #[cfg(test)]
@@ -189,16 +218,33 @@ mod tests {
     use glam::Vec3;
 
     const fn seg(name: &'static str, parent: u8) -> Segment<'static> {
-        Segment { name, parent, origin: Vec3::Y, joint: Joint::FIXED, touch: Vec3::Y }
+        Segment {
+            name,
+            parent,
+            origin: Vec3::Y,
+            joint: Joint::FIXED,
+            touch: Vec3::Y,
+        }
     }
 
     // Figure 15(a): A is the root; B below A branches into C and D; C branches
     // into E and F; G hangs below D.
-    const FIG15: [Segment<'static>; 7] =
-        [seg("A", NO_PARENT), seg("B", 0), seg("C", 1), seg("D", 1), seg("E", 2), seg("F", 2), seg("G", 3)];
+    const FIG15: [Segment<'static>; 7] = [
+        seg("A", NO_PARENT),
+        seg("B", 0),
+        seg("C", 1),
+        seg("D", 1),
+        seg("E", 2),
+        seg("F", 2),
+        seg("G", 3),
+    ];
     const P: [u8; 7] = parents_of(&FIG15);
     const O: [Vec3; 7] = offsets_of(&FIG15);
-    const BODY: Body<'static> = Body { segments: &FIG15, parents: &P, offsets: &O };
+    const BODY: Body<'static> = Body {
+        segments: &FIG15,
+        parents: &P,
+        offsets: &O,
+    };
 
     fn children<const N: usize>(t: &ReachTree<N>, node: usize) -> ([usize; 4], usize) {
         let mut out = [0; 4];
@@ -212,7 +258,11 @@ mod tests {
 
     #[test]
     fn figure_15_reach_tree() {
-        let goals = [Goal::reach(0, Vec3::ZERO, 1.0), Goal::reach(4, Vec3::ZERO, 1.0), Goal::reach(6, Vec3::ZERO, 1.0)];
+        let goals = [
+            Goal::reach(0, Vec3::ZERO, 1.0),
+            Goal::reach(4, Vec3::ZERO, 1.0),
+            Goal::reach(6, Vec3::ZERO, 1.0),
+        ];
         let t = ReachTree::<8>::build(&BODY, &goals).unwrap();
         // Nodes A, B, E, G; B is the implicit branch; C (one goal subtree) is not.
         let segs: [usize; 4] = core::array::from_fn(|i| t.segment(i).unwrap());
@@ -231,12 +281,18 @@ mod tests {
 
     #[test]
     fn inactive_goals_are_pruned_and_bad_indices_rejected() {
-        let goals = [Goal::reach(4, Vec3::ZERO, 0.0), Goal::reach(6, Vec3::ZERO, 2.0)];
+        let goals = [
+            Goal::reach(4, Vec3::ZERO, 0.0),
+            Goal::reach(6, Vec3::ZERO, 2.0),
+        ];
         let t = ReachTree::<8>::build(&BODY, &goals).unwrap();
         assert_eq!((t.len(), t.root_segment()), (1, Some(6)));
         // The root's chain to the body root (anchor 0) is movable.
         assert!(t.moves(1, Some(0)) && t.moves(3, Some(0)) && !t.moves(2, Some(0)));
-        assert_eq!(ReachTree::<8>::build(&BODY, &[Goal::reach(9, Vec3::ZERO, 1.0)]), Err(SolveError::BadGoal(0)));
+        assert_eq!(
+            ReachTree::<8>::build(&BODY, &[Goal::reach(9, Vec3::ZERO, 1.0)]),
+            Err(SolveError::BadGoal(0))
+        );
         assert!(ReachTree::<8>::build(&BODY, &[]).unwrap().is_empty());
     }
 
@@ -252,6 +308,9 @@ mod tests {
         let segs: [usize; 4] = core::array::from_fn(|i| t.segment(i).unwrap());
         // Lower torso, upper torso (the implicit branch), left shoulder, right hand.
         assert_eq!(segs, [0, 1, 4, 11]);
-        assert_eq!([t.parent(1), t.parent(2), t.parent(3)], [Some(0), Some(1), Some(1)]);
+        assert_eq!(
+            [t.parent(1), t.parent(2), t.parent(3)],
+            [Some(0), Some(1), Some(1)]
+        );
     }
 }

@@ -60,7 +60,7 @@ const TRANSLATION: u8 = u8::MAX;
 /// `f32` Cholesky resolves (about 1e4 against the identity).
 const MIN_DAMPING: f32 = 1e-2;
 /// Beyond this damping a step is pointless: the error is at a minimum.
-const MAX_DAMPING: f32 = 1.0;
+const MAX_DAMPING: f32 = 100.0;
 /// A relative decrease of the error below this is "no further improvement".
 const STALL: f32 = 1e-6;
 /// Rounds of clamping variables that a step would push through a limit.
@@ -124,7 +124,11 @@ struct Slots {
 
 impl Slots {
     fn new<const N: usize>(work: &Work<'_, '_, N>, wmax: f32) -> Result<Self, SolveError> {
-        let mut slots = Slots { s: [EMPTY_SLOT; MAX_GOALS], count: 0, awake: 0 };
+        let mut slots = Slots {
+            s: [EMPTY_SLOT; MAX_GOALS],
+            count: 0,
+            awake: 0,
+        };
         for (i, g) in work.goals.iter().enumerate().filter(|(_, g)| g.is_active()) {
             let (kind, one_sided) = match g.target {
                 Target::Position(_) => (Kind::Point, false),
@@ -133,8 +137,18 @@ impl Slots {
             };
             let rel = g.weight / wmax;
             let sw = rel * math::rsqrt(rel);
-            let free = slots.s.get_mut(slots.count).ok_or(SolveError::TooManyGoals)?;
-            *free = Slot { goal: i, kind, one_sided, sw_full: sw, sw, ..EMPTY_SLOT };
+            let free = slots
+                .s
+                .get_mut(slots.count)
+                .ok_or(SolveError::TooManyGoals)?;
+            *free = Slot {
+                goal: i,
+                kind,
+                one_sided,
+                sw_full: sw,
+                sw,
+                ..EMPTY_SLOT
+            };
             slots.count += 1;
         }
         Ok(slots)
@@ -146,10 +160,20 @@ impl Slots {
 
     /// Refreshes geometry and scaled residuals `r` at the current pose; returns
     /// (the scaled error `Σ |r̃|²`, the largest squared unscaled residual).
-    fn evaluate<const N: usize>(&mut self, work: &Work<'_, '_, N>, r: &mut Rhs) -> Result<(f32, f32), SolveError> {
+    fn evaluate<const N: usize>(
+        &mut self,
+        work: &Work<'_, '_, N>,
+        r: &mut Rhs,
+    ) -> Result<(f32, f32), SolveError> {
         let (mut error, mut worst) = (0.0f32, 0.0f32);
         self.awake = 0;
-        for (j, (slot, rj)) in self.s.iter_mut().zip(r.iter_mut()).take(self.count).enumerate() {
+        for (j, (slot, rj)) in self
+            .s
+            .iter_mut()
+            .zip(r.iter_mut())
+            .take(self.count)
+            .enumerate()
+        {
             let bad = SolveError::BadGoal(u8::try_from(slot.goal).unwrap_or(u8::MAX));
             let g = work.goals.get(slot.goal).ok_or(bad)?;
             let values = match g.evaluate(work.body, work.pose).ok_or(bad)? {
@@ -164,7 +188,12 @@ impl Slots {
                     slot.n = normal;
                     slot.g = match g.frame {
                         Frame::World => Vec3::ZERO,
-                        Frame::Segment(f) => work.pose.positions.get(usize::from(f)).copied().unwrap_or(Vec3::ZERO),
+                        Frame::Segment(f) => work
+                            .pose
+                            .positions
+                            .get(usize::from(f))
+                            .copied()
+                            .unwrap_or(Vec3::ZERO),
                     };
                     let asleep = slot.one_sided && correction == 0.0;
                     slot.sw = if asleep { 0.0 } else { slot.sw_full };
@@ -245,9 +274,16 @@ fn groups<const N: usize>(
         }
     }
     let deps = |b: u64| {
-        masks.iter().take(slots.count).enumerate().fold((0u16, 0u16), |(a, f), (j, m)| {
-            (if m.0 & b != 0 { a | 1 << j } else { a }, if m.1 & b != 0 { f | 1 << j } else { f })
-        })
+        masks
+            .iter()
+            .take(slots.count)
+            .enumerate()
+            .fold((0u16, 0u16), |(a, f), (j, m)| {
+                (
+                    if m.0 & b != 0 { a | 1 << j } else { a },
+                    if m.1 & b != 0 { f | 1 << j } else { f },
+                )
+            })
     };
     let mut n = 0;
     let mut push = |g: Group| {
@@ -259,7 +295,13 @@ fn groups<const N: usize>(
     let anchor = match solver.root {
         RootMode::Float => {
             let (all, framed) = deps(u64::MAX);
-            push(Group { seg: TRANSLATION, count: 3, dep_a: all, dep_b: framed, ..Group::default() });
+            push(Group {
+                seg: TRANSLATION,
+                count: 3,
+                dep_a: all,
+                dep_b: framed,
+                ..Group::default()
+            });
             None
         }
         RootMode::Fixed => Some(0),
@@ -269,8 +311,19 @@ fn groups<const N: usize>(
             continue;
         }
         let (dep_a, dep_b) = deps(bit(s));
-        let mut g = Group { seg: u8::try_from(s).unwrap_or(0), dep_a, dep_b, ..Group::default() };
-        for ((d, min), max) in seg.joint.dofs().iter().zip(g.min.iter_mut()).zip(g.max.iter_mut()) {
+        let mut g = Group {
+            seg: u8::try_from(s).unwrap_or(0),
+            dep_a,
+            dep_b,
+            ..Group::default()
+        };
+        for ((d, min), max) in seg
+            .joint
+            .dofs()
+            .iter()
+            .zip(g.min.iter_mut())
+            .zip(g.max.iter_mut())
+        {
             (*min, *max) = (d.min, d.max);
             g.count += 1;
         }
@@ -281,18 +334,29 @@ fn groups<const N: usize>(
 
 /// Bit mask of the segments whose joints the groups move.
 fn moving_segments(groups: &[Group]) -> u64 {
-    groups.iter().filter(|g| !g.translation()).fold(0, |m, g| m | bit(usize::from(g.seg)))
+    groups
+        .iter()
+        .filter(|g| !g.translation())
+        .fold(0, |m, g| m | bit(usize::from(g.seg)))
 }
 
 /// Pivot and world axes of every group at the current pose.
-fn geometry<const N: usize>(work: &Work<'_, '_, N>, groups: &[Group], out: &mut [(Vec3, [Vec3; 3]); MAX_GROUPS]) {
+fn geometry<const N: usize>(
+    work: &Work<'_, '_, N>,
+    groups: &[Group],
+    out: &mut [(Vec3, [Vec3; 3]); MAX_GROUPS],
+) {
     for (g, o) in groups.iter().zip(out.iter_mut()) {
         if g.translation() {
             *o = (Vec3::ZERO, [Vec3::X, Vec3::Y, Vec3::Z]);
             continue;
         }
         let s = usize::from(g.seg);
-        let (Some(parent), Some(segment), Some(values)) = (work.body.parent(s), work.body.segment(s), work.angles.get(s)) else {
+        let (Some(parent), Some(segment), Some(values)) = (
+            work.body.parent(s),
+            work.body.segment(s),
+            work.angles.get(s),
+        ) else {
             continue;
         };
         let rp = work.pose.rotations.get(parent).copied().unwrap_or_default();
@@ -330,7 +394,9 @@ fn derivative(slot: &Slot, da: bool, db: bool, translation: bool, w: Vec3, p: Ve
             Vec3::new(j, 0.0, 0.0)
         }
         (Kind::Orientation, true) => Vec3::ZERO,
-        (Kind::Orientation, false) => (if da { w } else { Vec3::ZERO }) - (if db { w } else { Vec3::ZERO }),
+        (Kind::Orientation, false) => {
+            (if da { w } else { Vec3::ZERO }) - (if db { w } else { Vec3::ZERO })
+        }
     }
 }
 
@@ -363,7 +429,10 @@ struct Link {
     lever: Lever,
 }
 
-const NO_LINK: Link = Link { slot: 0, lever: Lever::Zero };
+const NO_LINK: Link = Link {
+    slot: 0,
+    lever: Lever::Zero,
+};
 /// The most (group, goal) links one step handles.
 pub(super) const MAX_LINKS: usize = 160;
 
@@ -378,10 +447,19 @@ struct Links {
 }
 
 impl Links {
-    const EMPTY: Links = Links { span: [(0, 0); MAX_GROUPS], links: [NO_LINK; MAX_LINKS], cols: [[Vec3::ZERO; 3]; MAX_LINKS] };
+    const EMPTY: Links = Links {
+        span: [(0, 0); MAX_GROUPS],
+        links: [NO_LINK; MAX_LINKS],
+        cols: [[Vec3::ZERO; 3]; MAX_LINKS],
+    };
 
     /// The links of every group at the current pivots and slots.
-    fn build(&mut self, groups: &[Group], geometry: &[(Vec3, [Vec3; 3]); MAX_GROUPS], slots: &Slots) -> Result<(), SolveError> {
+    fn build(
+        &mut self,
+        groups: &[Group],
+        geometry: &[(Vec3, [Vec3; 3]); MAX_GROUPS],
+        slots: &Slots,
+    ) -> Result<(), SolveError> {
         let mut used = 0usize;
         for ((g, (p, _)), span) in groups.iter().zip(geometry.iter()).zip(self.span.iter_mut()) {
             let start = used;
@@ -393,10 +471,16 @@ impl Links {
                 let (da, db) = (g.dep_a >> j & 1 != 0, g.dep_b >> j & 1 != 0);
                 let lever = lever(slot, da, db, g.translation(), *p);
                 let free = self.links.get_mut(used).ok_or(SolveError::TooManyGoals)?;
-                *free = Link { slot: u8::try_from(j).unwrap_or(0), lever };
+                *free = Link {
+                    slot: u8::try_from(j).unwrap_or(0),
+                    lever,
+                };
                 used += 1;
             }
-            *span = (u8::try_from(start).unwrap_or(0), u8::try_from(used - start).unwrap_or(0));
+            *span = (
+                u8::try_from(start).unwrap_or(0),
+                u8::try_from(used - start).unwrap_or(0),
+            );
         }
         Ok(())
     }
@@ -405,14 +489,20 @@ impl Links {
     fn of(&self, group: usize) -> (&[Link], &[[Vec3; 3]]) {
         let (start, len) = self.span.get(group).copied().unwrap_or((0, 0));
         let range = usize::from(start)..usize::from(start) + usize::from(len);
-        (self.links.get(range.clone()).unwrap_or(&[]), self.cols.get(range).unwrap_or(&[]))
+        (
+            self.links.get(range.clone()).unwrap_or(&[]),
+            self.cols.get(range).unwrap_or(&[]),
+        )
     }
 
     /// The links of a group and their column entries, the entries writable.
     fn of_mut(&mut self, group: usize) -> (&[Link], &mut [[Vec3; 3]]) {
         let (start, len) = self.span.get(group).copied().unwrap_or((0, 0));
         let range = usize::from(start)..usize::from(start) + usize::from(len);
-        (self.links.get(range.clone()).unwrap_or(&[]), self.cols.get_mut(range).unwrap_or(&mut []))
+        (
+            self.links.get(range.clone()).unwrap_or(&[]),
+            self.cols.get_mut(range).unwrap_or(&mut []),
+        )
     }
 }
 
@@ -426,7 +516,9 @@ fn lever(slot: &Slot, da: bool, db: bool, translation: bool, p: Vec3) -> Lever {
             Lever::Point(a - b)
         }
         (Kind::Orientation, true) => Lever::Zero,
-        (Kind::Orientation, false) => Lever::Axis(if da { 1.0 } else { 0.0 } - if db { 1.0 } else { 0.0 }),
+        (Kind::Orientation, false) => {
+            Lever::Axis(if da { 1.0 } else { 0.0 } - if db { 1.0 } else { 0.0 })
+        }
         (Kind::Plane, true) if !db => Lever::PlaneAxis(slot.n),
         (Kind::Plane, false) if !db => Lever::Plane((slot.x - p).cross(slot.n)),
         (Kind::Plane, _) => Lever::General { da, db },
@@ -440,13 +532,20 @@ fn entry(link: &Link, slot: &Slot, translation: bool, w: Vec3, p: Vec3, r: Vec3)
     let sw = slot.sw;
     match link.lever {
         Lever::Point(arm) => {
-            let tension = if translation { 0.0 } else { r.dot(arm) - w.dot(r) * w.dot(arm) };
+            let tension = if translation {
+                0.0
+            } else {
+                r.dot(arm) - w.dot(r) * w.dot(arm)
+            };
             (w.cross(arm) * sw, sw * tension)
         }
         Lever::Axis(k) => (w * (sw * k), 0.0),
         Lever::Plane(q) => {
             let (n, arm) = (slot.n, slot.x - p);
-            (Vec3::new(sw * w.dot(q), 0.0, 0.0), sw * r.x * (n.dot(arm) - w.dot(n) * w.dot(arm)))
+            (
+                Vec3::new(sw * w.dot(q), 0.0, 0.0),
+                sw * r.x * (n.dot(arm) - w.dot(n) * w.dot(arm)),
+            )
         }
         Lever::PlaneAxis(n) => (Vec3::new(sw * n.dot(w), 0.0, 0.0), 0.0),
         Lever::General { da, db } => (derivative(slot, da, db, translation, w, p) * sw, 0.0),
@@ -460,7 +559,9 @@ fn entry(link: &Link, slot: &Slot, translation: bool, w: Vec3, p: Vec3, r: Vec3)
 fn outer(a: &mut Blocks, links: &[Link], cols: &[[Vec3; 3]], k: usize, s: f32) {
     let col = |e: &[Vec3; 3]| e.get(k).copied().unwrap_or(Vec3::ZERO);
     for (i, (lt, et)) in links.iter().zip(cols).enumerate() {
-        let Some(row) = a.get_mut(usize::from(lt.slot)) else { continue };
+        let Some(row) = a.get_mut(usize::from(lt.slot)) else {
+            continue;
+        };
         let u = col(et) * s;
         for (lk, ek) in links.iter().zip(cols).take(i + 1) {
             let ck = col(ek);
@@ -504,7 +605,11 @@ fn chol3_inverse(m: Mat3) -> Option<Mat3> {
     let m10 = -l10 * i00 * i11;
     let m21 = -l21 * i11 * i22;
     let m20 = -(l20 * i00 + l21 * m10) * i22;
-    Some(Mat3::from_cols(Vec3::new(i00, m10, m20), Vec3::new(0.0, i11, m21), Vec3::new(0.0, 0.0, i22)))
+    Some(Mat3::from_cols(
+        Vec3::new(i00, m10, m20),
+        Vec3::new(0.0, i11, m21),
+        Vec3::new(0.0, 0.0, i22),
+    ))
 }
 
 /// Solves `A·y = b` for the block matrix `a` (lower block triangle, `n`
@@ -513,11 +618,17 @@ fn chol3_inverse(m: Mat3) -> Option<Mat3> {
 fn block_cholesky_solve(a: &mut Blocks, n: usize, b: &mut Rhs) -> bool {
     let n = n.min(MAX_GOALS);
     for s in 0..n {
-        let Some((done, rest)) = a.split_at_mut_checked(s) else { return false };
-        let Some(row_s) = rest.first_mut() else { return false };
+        let Some((done, rest)) = a.split_at_mut_checked(s) else {
+            return false;
+        };
+        let Some(row_s) = rest.first_mut() else {
+            return false;
+        };
         // Off-diagonal blocks of row s: L_sk = (A_sk − Σ_{j<k} L_sj·L_kjᵀ)·L_kk⁻ᵀ.
         for (k, row_k) in done.iter().enumerate() {
-            let Some((left, tail)) = row_s.split_at_mut_checked(k) else { return false };
+            let Some((left, tail)) = row_s.split_at_mut_checked(k) else {
+                return false;
+            };
             let mut acc = tail.first().copied().unwrap_or(Mat3::ZERO);
             for (lsj, lkj) in left.iter().zip(row_k.iter()) {
                 acc -= *lsj * lkj.transpose();
@@ -528,17 +639,23 @@ fn block_cholesky_solve(a: &mut Blocks, n: usize, b: &mut Rhs) -> bool {
             }
         }
         // Diagonal: L_ss·L_ssᵀ = A_ss − Σ_k L_sk·L_skᵀ; keep L_ss⁻¹.
-        let Some((left, tail)) = row_s.split_at_mut_checked(s) else { return false };
+        let Some((left, tail)) = row_s.split_at_mut_checked(s) else {
+            return false;
+        };
         let mut acc = tail.first().copied().unwrap_or(Mat3::ZERO);
         for l in left.iter() {
             acc -= *l * l.transpose();
         }
-        let (Some(inv), Some(x)) = (chol3_inverse(acc), tail.first_mut()) else { return false };
+        let (Some(inv), Some(x)) = (chol3_inverse(acc), tail.first_mut()) else {
+            return false;
+        };
         *x = inv;
     }
     // L·z = b.
     for (s, row) in a.iter().enumerate().take(n) {
-        let Some((head, tail)) = b.split_at_mut_checked(s) else { return false };
+        let Some((head, tail)) = b.split_at_mut_checked(s) else {
+            return false;
+        };
         let mut v = tail.first().copied().unwrap_or(Vec3::ZERO);
         for (l, z) in row.iter().zip(head.iter()) {
             v -= *l * *z;
@@ -549,8 +666,12 @@ fn block_cholesky_solve(a: &mut Blocks, n: usize, b: &mut Rhs) -> bool {
     }
     // Lᵀ·y = z, by rows of L.
     for (s, row) in a.iter().enumerate().take(n).rev() {
-        let Some((head, tail)) = b.split_at_mut_checked(s) else { return false };
-        let (Some(x), Some(inv)) = (tail.first_mut(), row.get(s)) else { return false };
+        let Some((head, tail)) = b.split_at_mut_checked(s) else {
+            return false;
+        };
+        let (Some(x), Some(inv)) = (tail.first_mut(), row.get(s)) else {
+            return false;
+        };
         *x = inv.transpose() * *x;
         let ys = *x;
         for (bk, l) in head.iter_mut().zip(row.iter()) {
@@ -576,7 +697,14 @@ struct Linear {
 }
 
 /// Computes the step `lin.delta`; false if the system is singular.
-fn step<const N: usize>(work: &Work<'_, '_, N>, slots: &mut Slots, r: &mut Rhs, groups: &[Group], lambda2: f32, lin: &mut Linear) -> bool {
+fn step<const N: usize>(
+    work: &Work<'_, '_, N>,
+    slots: &mut Slots,
+    r: &mut Rhs,
+    groups: &[Group],
+    lambda2: f32,
+    lin: &mut Linear,
+) -> bool {
     let n = slots.count;
     for _round in 0..2 {
         for row in lin.a.iter_mut().take(n) {
@@ -586,18 +714,30 @@ fn step<const N: usize>(work: &Work<'_, '_, N>, slots: &mut Slots, r: &mut Rhs, 
         }
         // Active set, damping, A = J̃·D⁻¹·J̃ᵀ + I.
         for (gi, g) in groups.iter().enumerate() {
-            let (Some(&(p, axes)), Some(inv_d), Some(delta)) = (lin.geometry.get(gi), lin.inv_d.get_mut(gi), lin.delta.get_mut(gi)) else {
+            let (Some(&(p, axes)), Some(inv_d), Some(delta)) = (
+                lin.geometry.get(gi),
+                lin.inv_d.get_mut(gi),
+                lin.delta.get_mut(gi),
+            ) else {
                 continue;
             };
             let (links, cols) = lin.links.of_mut(gi);
             let x = value(work, g);
             for k in 0..usize::from(g.count).min(3) {
-                let (Some(&w), Some(id), Some(d)) = (axes.get(k), inv_d.get_mut(k), delta.get_mut(k)) else { continue };
+                let (Some(&w), Some(id), Some(d)) =
+                    (axes.get(k), inv_d.get_mut(k), delta.get_mut(k))
+                else {
+                    continue;
+                };
                 *d = 0.0;
                 let (mut curvature, mut grad, mut tension) = (0.0f32, 0.0f32, 0.0f32);
                 for (link, e) in links.iter().zip(cols.iter_mut()) {
                     let j = usize::from(link.slot);
-                    let (Some(slot), Some(&rj), Some(ek)) = (slots.s.get(j), r.get(j), e.get_mut(k)) else { continue };
+                    let (Some(slot), Some(&rj), Some(ek)) =
+                        (slots.s.get(j), r.get(j), e.get_mut(k))
+                    else {
+                        continue;
+                    };
                     let (c, t) = entry(link, slot, g.translation(), w, p, rj);
                     *ek = c;
                     curvature += c.length_squared();
@@ -606,7 +746,11 @@ fn step<const N: usize>(work: &Work<'_, '_, N>, slots: &mut Slots, r: &mut Rhs, 
                 }
                 let (min, max, v) = limits(g, &x, k);
                 let held = !g.translation() && at_limit_outward(min, max, v, grad);
-                *id = if held { 0.0 } else { 1.0 / (lambda2 * (curvature + 1e-6) + larger(tension, 0.0)) };
+                *id = if held {
+                    0.0
+                } else {
+                    1.0 / (lambda2 * (curvature + 1e-6) + larger(tension, 0.0))
+                };
                 if *id != 0.0 {
                     outer(&mut lin.a, links, cols, k, *id);
                 }
@@ -631,18 +775,28 @@ fn step<const N: usize>(work: &Work<'_, '_, N>, slots: &mut Slots, r: &mut Rhs, 
             let last = pass + 1 == CLAMP_PASSES;
             let mut clamped = false;
             for (gi, g) in groups.iter().enumerate() {
-                let (Some(inv_d), Some(delta)) = (lin.inv_d.get_mut(gi), lin.delta.get_mut(gi)) else { continue };
+                let (Some(inv_d), Some(delta)) = (lin.inv_d.get_mut(gi), lin.delta.get_mut(gi))
+                else {
+                    continue;
+                };
                 let (links, cols) = lin.links.of(gi);
                 let x = value(work, g);
                 for k in 0..usize::from(g.count).min(3) {
-                    let (Some(id), Some(d)) = (inv_d.get_mut(k), delta.get_mut(k)) else { continue };
+                    let (Some(id), Some(d)) = (inv_d.get_mut(k), delta.get_mut(k)) else {
+                        continue;
+                    };
                     if *id == 0.0 {
                         continue;
                     }
                     let cy: f32 = links
                         .iter()
                         .zip(cols)
-                        .map(|(link, e)| e.get(k).copied().unwrap_or(Vec3::ZERO).dot(y.get(usize::from(link.slot)).copied().unwrap_or(Vec3::ZERO)))
+                        .map(|(link, e)| {
+                            e.get(k)
+                                .copied()
+                                .unwrap_or(Vec3::ZERO)
+                                .dot(y.get(usize::from(link.slot)).copied().unwrap_or(Vec3::ZERO))
+                        })
                         .sum();
                     *d = cy * *id;
                     if g.translation() || last {
@@ -682,7 +836,11 @@ fn step<const N: usize>(work: &Work<'_, '_, N>, slots: &mut Slots, r: &mut Rhs, 
 /// The limits of DOF `k` of a group and its current value.
 #[inline]
 fn limits(g: &Group, values: &[f32; 3], k: usize) -> (f32, f32, f32) {
-    (g.min.get(k).copied().unwrap_or(0.0), g.max.get(k).copied().unwrap_or(0.0), values.get(k).copied().unwrap_or(0.0))
+    (
+        g.min.get(k).copied().unwrap_or(0.0),
+        g.max.get(k).copied().unwrap_or(0.0),
+        values.get(k).copied().unwrap_or(0.0),
+    )
 }
 
 /// Wakes every standby plane whose point the step would carry through the
@@ -690,12 +848,19 @@ fn limits(g: &Group, values: &[f32; 3], k: usize) -> (f32, f32, f32) {
 /// woke, so that the step is recomputed with it.
 fn wake(slots: &mut Slots, r: &mut Rhs, groups: &[Group], lin: &Linear) -> bool {
     let mut woke = false;
-    for (j, (slot, rj)) in slots.s.iter_mut().zip(r.iter_mut()).take(slots.count).enumerate() {
+    for (j, (slot, rj)) in slots
+        .s
+        .iter_mut()
+        .zip(r.iter_mut())
+        .take(slots.count)
+        .enumerate()
+    {
         if slot.sw != 0.0 || slot.kind != Kind::Plane {
             continue;
         }
         let mut ds = 0.0;
-        for (g, ((p, axes), delta)) in groups.iter().zip(lin.geometry.iter().zip(lin.delta.iter())) {
+        for (g, ((p, axes), delta)) in groups.iter().zip(lin.geometry.iter().zip(lin.delta.iter()))
+        {
             let (da, db) = (g.dep_a >> j & 1 != 0, g.dep_b >> j & 1 != 0);
             if da || db {
                 for (w, d) in axes.iter().zip(delta).take(usize::from(g.count)) {
@@ -719,18 +884,35 @@ fn value<const N: usize>(work: &Work<'_, '_, N>, g: &Group) -> [f32; 3] {
     if g.translation() {
         return [0.0; 3];
     }
-    work.angles.get(usize::from(g.seg)).copied().unwrap_or([0.0; 3])
+    work.angles
+        .get(usize::from(g.seg))
+        .copied()
+        .unwrap_or([0.0; 3])
 }
 
 /// Applies a step, scaled to at most [`MAX_STEP`], clamped into the limits.
 fn apply<const N: usize>(work: &mut Work<'_, '_, N>, groups: &[Group], delta: &PerDof) {
-    let biggest = delta.iter().take(groups.len()).flatten().fold(0.0f32, |m, d| larger(m, math::abs(*d)));
-    let scale = if biggest > MAX_STEP { MAX_STEP / biggest } else { 1.0 };
+    let biggest = delta
+        .iter()
+        .take(groups.len())
+        .flatten()
+        .fold(0.0f32, |m, d| larger(m, math::abs(*d)));
+    let scale = if biggest > MAX_STEP {
+        MAX_STEP / biggest
+    } else {
+        1.0
+    };
     for (g, d) in groups.iter().zip(delta) {
         if g.translation() {
             work.angles.root_position += Vec3::new(d[0], d[1], d[2]) * scale;
         } else if let Some(values) = work.angles.get_mut(usize::from(g.seg)) {
-            for (((x, d), min), max) in values.iter_mut().zip(d).zip(&g.min).zip(&g.max).take(usize::from(g.count)) {
+            for (((x, d), min), max) in values
+                .iter_mut()
+                .zip(d)
+                .zip(&g.min)
+                .zip(&g.max)
+                .take(usize::from(g.count))
+            {
                 let moved = *x + d * scale;
                 *x = if moved >= *max {
                     *max
@@ -745,8 +927,16 @@ fn apply<const N: usize>(work: &mut Work<'_, '_, N>, groups: &[Group], delta: &P
 }
 
 /// Weighted DLS over the whole reach tree; returns (iterations, converged).
-pub(super) fn solve<const N: usize>(solver: &Solver, tree: &ReachTree<N>, work: &mut Work<'_, '_, N>) -> Result<(u32, bool), SolveError> {
-    let wmax = work.goals.iter().filter(|g| g.is_active()).fold(0.0f32, |m, g| larger(m, g.weight));
+pub(super) fn solve<const N: usize>(
+    solver: &Solver,
+    tree: &ReachTree<N>,
+    work: &mut Work<'_, '_, N>,
+) -> Result<(u32, bool), SolveError> {
+    let wmax = work
+        .goals
+        .iter()
+        .filter(|g| g.is_active())
+        .fold(0.0f32, |m, g| larger(m, g.weight));
     if wmax <= 0.0 {
         return Ok((0, true));
     }
@@ -836,7 +1026,11 @@ mod tests {
         // A = [[4,2,0 | 1,0,0],[2,5,1 | 0,1,0],[0,1,3 | 0,0,1] ; sym] + the 3×3
         // identity-like lower-right block diag(2,2,2); solve A·y = b and check
         // A·y = b by multiplying back with the original blocks.
-        let a00 = Mat3::from_cols(Vec3::new(4.0, 2.0, 0.0), Vec3::new(2.0, 5.0, 1.0), Vec3::new(0.0, 1.0, 3.0));
+        let a00 = Mat3::from_cols(
+            Vec3::new(4.0, 2.0, 0.0),
+            Vec3::new(2.0, 5.0, 1.0),
+            Vec3::new(0.0, 1.0, 3.0),
+        );
         let a10 = Mat3::IDENTITY;
         let a11 = Mat3::from_diagonal(Vec3::splat(2.0));
         let mut a: Blocks = [[Mat3::ZERO; MAX_GOALS]; MAX_GOALS];
