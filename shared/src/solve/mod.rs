@@ -36,6 +36,28 @@
 //!   not changed. Put a goal on the body root to make it part of the solution.
 //! - [`RootMode::Fixed`] (a puppet on a stand): the body root never moves; the
 //!   chain from the body root to the reach-tree root is solved instead.
+//!
+//! ## Measured (CMU skeleton, root fixed, both hands and feet, 57 DOFs moving)
+//!
+//! `tests/benches/solve.rs` prints the full table. In short, from a synthesized
+//! start (goals ≤ 3 cm from a reachable pose): the greedy chain solver leaves
+//! goals 48 mm away on average (the triangle rule swings the whole spine and
+//! then hits limits: the "local minima" the paper warns of); CCD, chain DLS and
+//! tree DLS all meet every goal to 0.01 mm, in 97, 23 and 16 µs on the host.
+//! From the rest pose tree DLS meets all goals on 30 of 32 problems (chain DLS
+//! and CCD 26). On the emulated Cortex-M4F (instruction counts, not cycles),
+//! tree DLS takes about 257 k instructions cold (3.8 iterations) and 145 k warm
+//! (2 iterations, goals moved ≤ 2 cm): one iteration is about 55 k (forward
+//! kinematics 8 k, the 57 columns and their 3×3 blocks about 30 k), the set-up
+//! about 45 k. Fewer moving DOFs or goals cost proportionally less.
+//!
+//! ## Use from the firmware
+//!
+//! ```text
+//! let mut angles = Angles::<32>::from_local(&body, &synthesized_local)?; // or last frame's
+//! let report = solve(&Solver::DEFAULT, &body, &goals, &mut angles, &mut pose)?;
+//! // angles: joint angles within limits for the servo map; pose: world pose.
+//! ```
 
 mod balance;
 mod ccd;
