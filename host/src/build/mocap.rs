@@ -73,7 +73,7 @@ pub fn load(spec: &Spec, m: &MocapSpec, tick: &dyn Fn(&str)) -> Result<Mocap, Bu
                 Some(path) => {
                     let file =
                         crate::rigfile::load(path).map_err(|e| BuildError::Data(e.to_string()))?;
-                    Rig::from_rigfile(file, &sk, &spec.source, spec.rig.line)?
+                    Rig::from_rigfile(file, &sk, &spec.source, &spec.rig)?
                 }
                 None => Rig::from_skeleton(&sk, &spec.rig, &spec.source)?,
             });

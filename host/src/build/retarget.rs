@@ -19,6 +19,11 @@
 //!   joint → segment, with an optional `rotation_offset` applied after the
 //!   mocap joint's world rotation: `W_rig = W_mocap · offset`). A segment
 //!   with no mocap joint keeps its rest orientation relative to its parent.
+//!   With `[rig] align_rest = true`, every segment whose map entry gives no
+//!   `rotation_offset` gets one computed from the two rest poses: the
+//!   shortest-arc rotation taking the rig's bone (towards its first mapped
+//!   child) onto the mocap's bone at rest (a T-posed mocap arm onto a
+//!   hanging puppet arm, the CMU thighs' 20° splay onto a straight leg).
 //!   The root's path is scaled by the rig's rest hip height (`root_position`
 //!   y) over the mocap skeleton's rest hip height (the drop from the root to
 //!   its lowest joint with every rotation at zero). The table's rig hash is
@@ -112,8 +117,9 @@ impl Rig {
         file: RigFile,
         sk: &CoreSkeleton,
         src: &Source,
-        line: usize,
+        spec: &RigSpec,
     ) -> Result<Self, InputError> {
+        let line = spec.line;
         let desc = file.desc();
         let n = desc.segments.len();
         let mut source = vec![None; n];
@@ -145,6 +151,31 @@ impl Rig {
             );
             return Err(src.error_line(line, "rig.file", problem));
         }
+        let parents: Vec<u8> = desc.segments.iter().map(|s| s.parent).collect();
+        let offsets: Vec<Vec3> = desc
+            .segments
+            .iter()
+            .map(|s| Vec3::from_array(s.origin))
+            .collect();
+        let touches: Vec<Vec3> = desc
+            .segments
+            .iter()
+            .map(|s| Vec3::from_array(s.touch))
+            .collect();
+        if spec.align_rest {
+            let given: Vec<bool> = rotation_offsets
+                .iter()
+                .map(|q| *q != Quat::IDENTITY)
+                .collect();
+            for (i, auto) in align_rest(sk, &parents, &offsets, &touches, &source)
+                .into_iter()
+                .enumerate()
+            {
+                if let (false, Some(q)) = (given[i], auto) {
+                    rotation_offsets[i] = q;
+                }
+            }
+        }
         let rig_height = desc.root_position[1];
         let mocap_height = rest_height(sk);
         let root_scale = if rig_height > 0.0 && mocap_height > 1e-3 {
@@ -154,12 +185,8 @@ impl Rig {
         };
         Ok(Self {
             names: file.segment_names().to_vec(),
-            parents: desc.segments.iter().map(|s| s.parent).collect(),
-            offsets: desc
-                .segments
-                .iter()
-                .map(|s| Vec3::from_array(s.origin))
-                .collect(),
+            parents,
+            offsets,
             source,
             rotation_offsets,
             root_scale,
@@ -226,6 +253,52 @@ impl Rig {
         local.root_position = root.unwrap_or(Vec3::ZERO) * self.root_scale;
         pose::forward(&self.hierarchy(), &local, out)
     }
+}
+
+/// Rest-pose alignment (`[rig] align_rest`): for each non-root rig segment
+/// with a mocap joint, the shortest-arc rotation taking the rig's rest bone
+/// direction onto the mocap's (all rotations zero). The bone runs to the
+/// segment's first child that has a mocap joint (rig: the child's offset;
+/// mocap: between the two joints); a rig leaf uses its touch point, and the
+/// mocap joint's first child. With it as the rotation offset,
+/// `W_mocap · offset` points the rig bone where the mocap bone points (the
+/// twist about the bone is taken as zero).
+fn align_rest(
+    sk: &CoreSkeleton,
+    parents: &[u8],
+    offsets: &[Vec3],
+    touches: &[Vec3],
+    source: &[Option<usize>],
+) -> Vec<Option<Quat>> {
+    let mut rest = vec![Vec3::ZERO; sk.len()];
+    for i in 1..sk.len() {
+        rest[i] = rest
+            .get(usize::from(sk.parents[i]))
+            .copied()
+            .unwrap_or(Vec3::ZERO)
+            + sk.offsets[i];
+    }
+    let mocap_child = |j: usize| (j + 1..sk.len()).find(|&c| usize::from(sk.parents[c]) == j);
+    (0..parents.len())
+        .map(|i| {
+            if parents[i] == NO_PARENT {
+                return None;
+            }
+            let me = source[i]?;
+            let child = (i + 1..parents.len())
+                .find(|&j| usize::from(parents[j]) == i && source[j].is_some());
+            let (d_rig, to) = match child {
+                Some(c) => (offsets[c], source[c]?),
+                None => (touches[i], mocap_child(me)?),
+            };
+            let d_rig = d_rig.as_dvec3().normalize_or_zero();
+            let d_mocap = (rest[to] - rest[me]).as_dvec3().normalize_or_zero();
+            if d_rig == glam::DVec3::ZERO || d_mocap == glam::DVec3::ZERO {
+                return None;
+            }
+            Some(glam::DQuat::from_rotation_arc(d_rig, d_mocap).as_quat())
+        })
+        .collect()
 }
 
 /// The drop from the root to the lowest joint of the rest pose (every
@@ -295,6 +368,7 @@ mod tests {
             &sk,
             &RigSpec {
                 file: None,
+                align_rest: false,
                 scale: 0.5,
                 lengths,
                 line: 3,
@@ -325,11 +399,68 @@ mod tests {
         assert!((tip - Vec3::new(-0.25, 0.6, 0.0)).length() < 1e-5, "{tip}");
         let bad = RigSpec {
             file: None,
+            align_rest: false,
             scale: 1.0,
             lengths: [("elbow".to_owned(), 1.0)].into(),
             line: 3,
         };
         let e = Rig::from_skeleton(&sk, &bad, &src).unwrap_err();
         assert_eq!((e.line, e.field.as_str()), (3, "rig.lengths.elbow"));
+    }
+}
+
+#[cfg(test)]
+mod align_tests {
+    use super::*;
+
+    #[test]
+    fn rest_alignment_maps_a_t_posed_arm_onto_a_hanging_one() {
+        // Mocap: root, shoulder, elbow, wrist with the arm along +X at rest
+        // (T-pose). Rig: root, upper arm, forearm hanging along −Y, touch
+        // point of the forearm at its end.
+        let sk = CoreSkeleton {
+            names: vec!["root".into(), "arm".into(), "fore".into(), "hand".into()],
+            parents: vec![NO_PARENT, 0, 1, 2],
+            offsets: vec![
+                Vec3::ZERO,
+                Vec3::new(0.2, 0.5, 0.0),
+                Vec3::new(0.3, 0.0, 0.0),
+                Vec3::new(0.25, 0.0, 0.0),
+            ],
+            joints: vec![0, 1, 2, 3],
+        };
+        let parents = [NO_PARENT, 0, 1];
+        let offsets = [
+            Vec3::ZERO,
+            Vec3::new(0.1, 0.3, 0.0),
+            Vec3::new(0.0, -0.16, 0.0),
+        ];
+        let touches = [
+            Vec3::ZERO,
+            Vec3::new(0.0, -0.16, 0.0),
+            Vec3::new(0.0, -0.15, 0.0),
+        ];
+        let source = [Some(0), Some(1), Some(2)];
+        let o = align_rest(&sk, &parents, &offsets, &touches, &source);
+        assert_eq!(o[0], None);
+        // Both bones: −Y onto +X, a quarter turn about +Z.
+        let quarter = Quat::from_xyzw(
+            0.0,
+            0.0,
+            std::f32::consts::FRAC_1_SQRT_2,
+            std::f32::consts::FRAC_1_SQRT_2,
+        );
+        for q in [o[1].unwrap(), o[2].unwrap()] {
+            assert!(q.dot(quarter).abs() > 1.0 - 1e-6, "{q:?}");
+        }
+        // With the arm lowered in the mocap (−90° about Z at the shoulder),
+        // the rig's arm hangs at its rest orientation.
+        let lowered = Quat::from_xyzw(
+            0.0,
+            0.0,
+            -std::f32::consts::FRAC_1_SQRT_2,
+            std::f32::consts::FRAC_1_SQRT_2,
+        );
+        assert!((lowered * quarter).dot(Quat::IDENTITY).abs() > 1.0 - 1e-6);
     }
 }

@@ -21,6 +21,7 @@
 //!
 //! [rig]                     # retarget: see `retarget`
 //! # file = "../../rigs/cmu31.toml"  # a rig file (relative to the spec, or a name in rigs/)
+//! # align_rest = false      # with a file: rotation offsets from the rest poses
 //! scale = 1.0               # without a file: uniform scale of every offset and the root path
 //! lengths = { rradius = 1.0 } # without a file: per-segment factor on the offset to the parent
 //!
@@ -204,6 +205,8 @@ impl AxisSpec {
 pub struct RigSpec {
     /// A rig file (else the mocap skeleton is the rig).
     pub file: Option<PathBuf>,
+    /// Compute missing rotation offsets from the rest poses (rig files).
+    pub align_rest: bool,
     /// Uniform scale.
     pub scale: f64,
     /// Per-segment offset factors.
@@ -291,6 +294,7 @@ struct RawAxis {
 #[serde(deny_unknown_fields)]
 struct RawRig {
     file: Option<Spanned<String>>,
+    align_rest: Option<Spanned<bool>>,
     scale: Option<Spanned<f64>>,
     #[serde(default)]
     lengths: BTreeMap<String, Spanned<f64>>,
@@ -736,6 +740,7 @@ impl Parser<'_> {
         let Some(r) = r else {
             return Ok(RigSpec {
                 file: None,
+                align_rest: false,
                 scale: 1.0,
                 lengths: BTreeMap::new(),
                 line: 0,
@@ -768,6 +773,13 @@ impl Parser<'_> {
             }
             None => None,
         };
+        if let (Some(a), None) = (&g.align_rest, &file) {
+            return self.err(
+                a.span(),
+                "rig.align_rest",
+                "needs a rig file (`file = ...`)",
+            );
+        }
         let scale = match &g.scale {
             Some(s) if !(s.get_ref().is_finite() && *s.get_ref() > 0.0) => {
                 return self.err(s.span(), "rig.scale", "must be a finite number > 0");
@@ -791,6 +803,7 @@ impl Parser<'_> {
             .as_ref()
             .map_or_else(|| self.line(&r.span()), |f| self.line(&f.span()));
         Ok(RigSpec {
+            align_rest: g.align_rest.as_ref().is_some_and(|a| *a.get_ref()),
             file,
             scale,
             lengths,
