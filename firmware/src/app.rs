@@ -1,31 +1,164 @@
 //! The app: the live loop, generic over the [`Board`].
 //!
-//! At this stage the loop runs the core's dial mode ([`marionette_core::frame`]):
-//! the tracker link carries little-endian `u16` dial values, each of which
-//! becomes one Pololu Maestro Set Target command on the servo bus. The value
-//! `DIAL_END` ends the session.
+//! All the per-frame work is the core's [`Performer`]; the app only moves
+//! bytes. Each pass of the loop:
+//!
+//! 1. reads whatever the tracker link has ready and feeds it to the
+//!    performer, sending each reply (`Status`, `Ack`, `Telemetry`) back as a
+//!    wire frame and each new set of servo targets to the servo bus as
+//!    Pololu Maestro Set Target commands;
+//! 2. every frame period of the board clock, calls [`Performer::tick`], which
+//!    eases the servos to rest after the fail-safe time-out or a disarm.
+//!
+//! Without a valid rig in the table region there is nothing to drive: the
+//! app answers `Hello` and `RequestStatus` with a `Status` whose reason is
+//! `NoRig`, refuses every other command, and never writes the servo bus.
 
 use crate::board::{Board, Outcome};
-use embedded_io::{Read, Write};
-use marionette_core::frame::{DIAL_END, dial_step};
-use marionette_core::servo::Calibration;
+use embedded_io::{Read, ReadReady, Write};
+use marionette_core::frame::{Cycles, Performer, Region, Update};
+use marionette_core::output::ServoOutput;
+use marionette_core::output::maestro::{Command, Maestro};
+use marionette_core::wire::{
+    self, Ack, CommandKind, Incoming, MAX_FRAME, Message, PROTOCOL_VERSION, Receiver, Status,
+    StatusReason,
+};
 
-/// Runs the loop until the host ends the session or a link fails.
+/// Bytes read from the tracker link per pass.
+const CHUNK: usize = 64;
+
+/// The board's cycle counter, seen by the core.
+struct BoardCycles<'b, B: Board>(&'b mut B);
+
+impl<B: Board> Cycles for BoardCycles<'_, B> {
+    fn now(&mut self) -> u32 {
+        self.0.cycles()
+    }
+}
+
+/// Runs the loop until the session ends (emulated board) or forever.
 pub fn run<B: Board>(board: &mut B) -> Outcome {
-    let cal = Calibration::HOBBY_180;
+    let region = Region::parse(board.tables());
+    match Performer::new(&region) {
+        Some(mut performer) => perform(board, &mut performer),
+        None => idle(board, region.reason),
+    }
+}
+
+/// Reads what the tracker link has ready into `buf`.
+fn read_ready<B: Board>(board: &mut B, buf: &mut [u8; CHUNK]) -> Result<usize, Outcome> {
+    let (tracker, _) = board.links();
+    match tracker.read_ready() {
+        Ok(true) => tracker.read(buf).map_err(|_| Outcome::LinkError),
+        Ok(false) => Ok(0),
+        Err(_) => Err(Outcome::LinkError),
+    }
+}
+
+fn perform<B: Board>(board: &mut B, performer: &mut Performer<'_, '_>) -> Outcome {
+    let period = performer.frame_period_us().max(1);
+    let mut last_tick = board.now_us();
+    let mut buf = [0u8; CHUNK];
     loop {
         board.feed_watchdog();
-        let (tracker, servo) = board.links();
-        let mut raw = [0u8; 2];
-        if tracker.read_exact(&mut raw).is_err() {
-            return Outcome::LinkError;
+        let n = match read_ready(board, &mut buf) {
+            Ok(n) => n,
+            Err(outcome) => return outcome,
+        };
+        let mut input = buf.get(..n).unwrap_or(&[]);
+        while !input.is_empty() {
+            let now = board.now_us();
+            let update = performer.receive(&mut input, now, &mut BoardCycles(board));
+            if let Err(outcome) = emit(board, performer, update) {
+                return outcome;
+            }
         }
-        let dial = u16::from_le_bytes(raw);
-        if dial == DIAL_END {
+        let now = board.now_us();
+        if now.wrapping_sub(last_tick) >= period {
+            last_tick = now;
+            let update = performer.tick(now);
+            if let Err(outcome) = emit(board, performer, update) {
+                return outcome;
+            }
+        }
+        if B::ENDS_ON_DISARM && performer.disarms() > 0 && performer.resting() {
             return Outcome::Done;
         }
-        if servo.write_all(&dial_step(dial, &cal)).is_err() {
-            return Outcome::LinkError;
+    }
+}
+
+/// Sends an update's servo targets and reply.
+fn emit<B: Board>(
+    board: &mut B,
+    performer: &Performer<'_, '_>,
+    update: Update,
+) -> Result<(), Outcome> {
+    let (tracker, servo) = board.links();
+    if update.outputs.is_some() {
+        let mut maestro = Maestro::new(&mut *servo, Command::SetTarget);
+        maestro
+            .write(performer.targets())
+            .map_err(|_| Outcome::LinkError)?;
+    }
+    if let Some(reply) = update.reply {
+        send(tracker, &reply)?;
+    }
+    Ok(())
+}
+
+/// Sends one message as a wire frame.
+fn send<W: Write>(link: &mut W, msg: &Message) -> Result<(), Outcome> {
+    let mut out = [0u8; MAX_FRAME];
+    match wire::encode(msg, &mut out) {
+        Ok(frame) => link.write_all(frame).map_err(|_| Outcome::LinkError),
+        // Every board-to-host message fits MAX_FRAME; nothing to send otherwise.
+        Err(_) => Ok(()),
+    }
+}
+
+/// No rig: report why, drive nothing.
+fn idle<B: Board>(board: &mut B, reason: StatusReason) -> Outcome {
+    let mut receiver: Receiver = Receiver::new();
+    let mut buf = [0u8; CHUNK];
+    loop {
+        board.feed_watchdog();
+        let n = match read_ready(board, &mut buf) {
+            Ok(n) => n,
+            Err(outcome) => return outcome,
+        };
+        let mut input = buf.get(..n).unwrap_or(&[]);
+        while let Some(incoming) = receiver.push_slice(&mut input) {
+            let status = Status {
+                protocol_version: PROTOCOL_VERSION,
+                armed: false,
+                table_ok: false,
+                reason,
+                errors: *receiver.errors(),
+                frames_ok: receiver.frames_ok(),
+            };
+            let (reply, end) = match incoming {
+                Incoming::Hello { .. } => (Some(Message::Status(status)), false),
+                Incoming::Command(c) => match c.kind() {
+                    CommandKind::RequestStatus => (Some(Message::Status(status)), false),
+                    kind => (
+                        Some(Message::Ack(Ack {
+                            seq: c.seq(),
+                            ok: false,
+                        })),
+                        kind == CommandKind::Disarm,
+                    ),
+                },
+                Incoming::Tracker(_) | Incoming::Params(_) => (None, false),
+            };
+            let (tracker, _) = board.links();
+            if let Some(reply) = reply
+                && let Err(outcome) = send(tracker, &reply)
+            {
+                return outcome;
+            }
+            if end && B::ENDS_ON_DISARM {
+                return Outcome::Done;
+            }
         }
     }
 }

@@ -53,6 +53,16 @@ pub trait Board {
     /// Tells the watchdog the loop is alive (no-op where there is none).
     fn feed_watchdog(&mut self);
 
+    /// A free-running cycle counter for the per-stage counts in telemetry
+    /// (wrapping; 0 where there is none).
+    fn cycles(&mut self) -> u32 {
+        0
+    }
+
+    /// Whether a `Disarm` command ends the run once the servos are at rest
+    /// (the emulated board, so tests end cleanly); a real board keeps going.
+    const ENDS_ON_DISARM: bool = false;
+
     /// Ends the run: on the emulated board QEMU exits with the outcome's
     /// status; a real board parks with its outputs held.
     fn finish(&mut self, outcome: Outcome) -> !;

@@ -5,10 +5,12 @@
 //! calls).
 
 pub mod blob;
+pub mod build;
 pub mod cmd;
 pub mod flash;
 pub mod icount;
 pub mod import;
+pub mod perform;
 pub mod qemu;
 pub mod rigfile;
 pub mod render;

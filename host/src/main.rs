@@ -18,12 +18,20 @@ enum Command {
     Emulate(cmd::emulate::Args),
     /// Instruction counts of the core on the emulated Cortex-M4F.
     Icount(cmd::icount::Args),
+    /// Run the live loop natively on a tracker recording and write the servo curves.
+    Sim(cmd::sim::Args),
     /// Draw a pose and its goals in four views (front, side, top, perspective).
     Render(cmd::render::Args),
     /// Draw curves over time from a CSV file (time column first).
     Plot(cmd::plot::Args),
     /// Flash the firmware ELF and/or the table blob with probe-rs.
     Flash(cmd::flash::Args),
+    /// Build a table blob from mocap or a JSON example set.
+    Build(cmd::build::Args),
+    /// Show a table blob's header, sizes and error bound.
+    Inspect(cmd::inspect::Args),
+    /// Synthesize a pose from a table blob at given parameters.
+    Synth(cmd::synth::Args),
     /// Position a rig to meet weighted goals (JSON in, pose and distances out).
     Solve(cmd::solve::Args),
 }
@@ -33,9 +41,13 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Emulate(args) => cmd::emulate::run(&args),
         Command::Icount(args) => cmd::icount::run(&args),
+        Command::Sim(args) => cmd::sim::run(&args),
         Command::Render(args) => cmd::render::run(&args),
         Command::Plot(args) => cmd::plot::run(&args),
         Command::Flash(args) => cmd::flash::run(&args),
+        Command::Build(args) => cmd::build::run(&args),
+        Command::Inspect(args) => cmd::inspect::run(&args),
+        Command::Synth(args) => cmd::synth::run(&args),
         Command::Solve(args) => cmd::solve::run(&args),
     };
     match result {

@@ -1,56 +1,657 @@
-//! One step of the live loop.
+//! The live loop: bytes from the tracker link in, servo targets out.
 //!
-//! At this stage the loop has one mode, the **dial**: a single parameter in
-//! `0..=DIAL_MAX` (a slider on the host, or a knob) sweeps one joint between its
-//! rest orientation and a key orientation by [`math::slerp`], and the joint's
-//! angle drives servo channel 0 through its [`Calibration`]. It exercises the
-//! whole byte-to-servo path (input, core math, servo mapping, Maestro encoding)
-//! and is computed bit-identically on the host and on the firmware.
+//! [`Performer`] is the whole per-frame pipeline of a puppet, shared by the
+//! firmware (which only moves bytes between it and the peripherals) and the
+//! host's `marionette sim` (which feeds it a recording). Given the same bytes
+//! and the same clock readings, both produce bit-identical servo targets.
+//!
+//! ## One tracker frame
+//!
+//! ```text
+//! wire::Receiver ─ ValidTrackerFrame ─▶ map   rig sensor map → parameters + weighted goals
+//!                                      ▶ synth grid query on the table blob, read in place
+//!                                      ▶ solve warm-started from the synthesized pose
+//!                                      ▶ servo joint angle → calibrated pulse → slew limit
+//! ```
+//!
+//! - **map**: [`Rig::map_sensors`] after boresight correction; `Params`
+//!   messages (dials) override parameters `0..k`, and `SetGoalWeight`
+//!   overrides goal weights.
+//! - **synth**: the table's grid is queried at the parameters (clamped or
+//!   projected into the valid cells, as the grid module documents) and the
+//!   pose of every segment is interpolated from the flash-resident samples.
+//! - **solve**: the synthesized pose is projected onto the joints' degrees of
+//!   freedom and the goals are solved from there ([`Solver::DEFAULT`]); the
+//!   solver never leaves a joint limit.
+//! - **servo**: each servo follows one joint angle through its calibration
+//!   and a [`Slew`] limiter, so no pulse leaves its calibrated range or moves
+//!   faster than the servo's speed and acceleration limits.
+//!
+//! ## Time
+//!
+//! One output step is made per accepted tracker frame. The slew limits of a
+//! step are those of `dt = min(Δt_tracker, frame period)`, where `Δt_tracker`
+//! is the difference of the frames' own timestamps: a tracker faster than the
+//! rig's frame rate cannot make a servo faster than its limit, and a slow one
+//! only makes it slower. Wrapping timestamps are handled; a timestamp that
+//! goes backwards counts as `dt = 0` (the smallest step the limiter allows).
+//!
+//! ## Fail-safe
+//!
+//! [`Performer::tick`] is called by the board every frame period with its own
+//! clock. When armed and no valid tracker frame has arrived for the rig's
+//! fail-safe timeout, every servo eases to its rest pulse within its slew
+//! limits. The same happens after `Disarm`. A board without a valid rig and
+//! table refuses to arm and reports why in its [`Status`].
 
-use crate::math;
-use crate::servo::{Calibration, maestro, quarter_us};
+use crate::body::{Angles, Body};
+use crate::goal::GoalSet;
+use crate::grid::{Adjust, Grid};
+use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
+use crate::rig::{MAX_PARAMS, Rig};
+use crate::servo::{Slew, quarter_us};
+use crate::solve::{self, Solver};
+use crate::table::{Kind, Table, TableError};
+use crate::wire::{
+    Ack, CommandKind, ErrorCounters, Incoming, List, MAX_GOALS, MAX_SENSORS, MAX_SERVOS, Message,
+    PROTOCOL_VERSION, Receiver, STAGES, Sensor, Status, StatusReason, Telemetry, ValidCommand,
+    ValidTrackerFrame,
+};
 use glam::Quat;
 
-/// The largest dial value; [`DIAL_END`] is reserved to end a session.
-pub const DIAL_MAX: u16 = 0xFFFE;
-/// The dial value that ends a session.
-pub const DIAL_END: u16 = 0xFFFF;
+/// A telemetry message goes out after every this many output frames.
+pub const TELEMETRY_EVERY: u32 = 10;
 
-/// The key orientation of the dial joint: 90° about +X.
-const KEY: Quat = Quat::from_xyzw(
-    core::f32::consts::FRAC_1_SQRT_2,
-    0.0,
-    0.0,
-    core::f32::consts::FRAC_1_SQRT_2,
-);
-
-/// The joint angle, radians, for a dial value (clamped to [`DIAL_MAX`]).
-#[must_use]
-pub fn dial_angle(dial: u16) -> f32 {
-    let t = f32::from(dial.min(DIAL_MAX)) / f32::from(DIAL_MAX);
-    math::quat_angle(math::slerp(Quat::IDENTITY, KEY, t))
+/// Stage indices in [`Telemetry::stage_counts`].
+pub mod stage {
+    /// Receiving and decoding the frame.
+    pub const DECODE: usize = 0;
+    /// Sensor map.
+    pub const MAP: usize = 1;
+    /// Synthesis from the tables.
+    pub const SYNTH: usize = 2;
+    /// Goal solving.
+    pub const SOLVE: usize = 3;
+    /// Servo mapping and slew limits.
+    pub const SERVO: usize = 4;
+    /// The whole frame.
+    pub const TOTAL: usize = 5;
 }
 
-/// The Maestro Set Target command for a dial value on channel 0.
-#[must_use]
-pub fn dial_step(dial: u16, cal: &Calibration) -> [u8; 4] {
-    maestro::set_target(0, quarter_us(cal.pulse_us(dial_angle(dial))))
+/// Why servo targets changed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Cause {
+    /// An accepted tracker frame (its sequence number).
+    Frame(u32),
+    /// Easing to rest: fail-safe time-out or disarmed.
+    Rest,
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
+/// What one call of [`Performer::receive`] or [`Performer::tick`] produced.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Update {
+    /// New servo targets are ready in [`Performer::targets`].
+    pub outputs: Option<Cause>,
+    /// A message to send back to the host.
+    pub reply: Option<Message>,
+}
 
-    #[test]
-    fn the_dial_sweeps_a_quarter_turn() {
-        assert_eq!(dial_angle(0), 0.0);
-        assert!((dial_angle(DIAL_MAX) - core::f32::consts::FRAC_PI_2).abs() < 1e-4);
-        // Halfway along the slerp is halfway in angle (f64 closed form: π/4).
-        assert!((dial_angle(DIAL_MAX / 2) - core::f32::consts::FRAC_PI_4).abs() < 1e-3);
-        // 0 rad is the middle of a ±90° servo: 1500 µs = 6000 quarter-µs.
-        assert_eq!(
-            dial_step(0, &Calibration::HOBBY_180),
-            maestro::set_target(0, 6000)
+/// Reads a free-running cycle (or instruction) counter for the stage
+/// counts; the host passes one that reads zero.
+pub trait Cycles {
+    /// The counter now; differences are taken with wrapping arithmetic.
+    fn now(&mut self) -> u32;
+}
+
+/// A [`Cycles`] that always reads zero.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoCycles;
+
+impl Cycles for NoCycles {
+    #[inline]
+    fn now(&mut self) -> u32 {
+        0
+    }
+}
+
+/// The validated contents of the table region: the rig blob, then the table
+/// blob at the next 4-byte boundary.
+#[derive(Clone, Debug)]
+pub struct Region<'a> {
+    /// The rig, if its blob is valid.
+    pub rig: Option<Rig<'a>>,
+    /// The table, if its blob is valid and matches the rig.
+    pub table: Option<Table<'a>>,
+    /// Why the board cannot arm ([`StatusReason::Ok`] if it can).
+    pub reason: StatusReason,
+}
+
+impl<'a> Region<'a> {
+    /// Validates a table region (magic, version, CRC and bounds of both
+    /// blobs, and that the table was built for this rig).
+    #[must_use]
+    pub fn parse(bytes: &'a [u8]) -> Self {
+        let Ok((rig, rest)) = Rig::parse(bytes) else {
+            return Self {
+                rig: None,
+                table: None,
+                reason: StatusReason::NoRig,
+            };
+        };
+        let pad = (4 - (bytes.len() - rest.len()) % 4) % 4;
+        let table_bytes = rest.get(pad..).unwrap_or(&[]);
+        if table_bytes.len() < 4 {
+            return Self {
+                rig: Some(rig),
+                table: None,
+                reason: StatusReason::NoTable,
+            };
+        }
+        let (table, reason) = match Table::parse(table_bytes) {
+            Ok(t) => match check_table(&rig, &t) {
+                StatusReason::Ok => (Some(t), StatusReason::Ok),
+                why => (None, why),
+            },
+            Err(e) => (None, table_reason(e)),
+        };
+        Self {
+            rig: Some(rig),
+            table,
+            reason,
+        }
+    }
+}
+
+/// Whether a valid table can drive this rig.
+fn check_table(rig: &Rig<'_>, table: &Table<'_>) -> StatusReason {
+    if table.rig_hash() != rig.rig_hash() || table.segment_count() != rig.body().len() {
+        StatusReason::RigMismatch
+    } else if table.kind() != Kind::Grid || table.axes().len() > MAX_PARAMS {
+        StatusReason::Unsupported
+    } else {
+        StatusReason::Ok
+    }
+}
+
+/// The status reason for a table that failed to parse.
+fn table_reason(e: TableError) -> StatusReason {
+    match e {
+        TableError::BadMagic => StatusReason::NoTable,
+        TableError::BadVersion { .. } => StatusReason::BadVersion,
+        TableError::BadCrc => StatusReason::BadCrc,
+        _ => StatusReason::BadBounds,
+    }
+}
+
+/// The live loop of one rig (see the module doc).
+pub struct Performer<'r, 'a> {
+    rig: &'r Rig<'a>,
+    table: Option<&'r Table<'a>>,
+    grid: Option<Grid<'a>>,
+    reason: StatusReason,
+    solver: Solver,
+    receiver: Receiver,
+    armed: bool,
+    resting: bool,
+    last_frame_us: u32,
+    last_tracker_us: Option<u32>,
+    params: [f32; MAX_PARAMS],
+    dials: List<f32, MAX_PARAMS>,
+    weights: [Option<f32>; MAX_GOALS],
+    boresight: [Quat; MAX_SENSORS],
+    last_sensors: List<Sensor, MAX_SENSORS>,
+    goals: GoalSet<MAX_GOALS>,
+    angles: Angles<MAX_SEGMENTS>,
+    synth: Pose<MAX_SEGMENTS>,
+    pose: Pose<MAX_SEGMENTS>,
+    local: LocalPose<MAX_SEGMENTS>,
+    slews: [Option<Slew>; MAX_SERVOS],
+    targets: [u16; MAX_SERVOS],
+    channels: usize,
+    residuals: [f32; MAX_GOALS],
+    stages: [u32; STAGES],
+    frames_out: u32,
+    adjusted: u32,
+    failed_frames: u32,
+    disarms: u32,
+}
+
+impl<'r, 'a> Performer<'r, 'a> {
+    /// A loop for `region`'s rig (disarmed; servos assumed at rest). Returns
+    /// `None` when the region holds no valid rig: there is nothing to drive.
+    #[must_use]
+    pub fn new(region: &'r Region<'a>) -> Option<Self> {
+        let rig = region.rig.as_ref()?;
+        let grid = region.table.as_ref().and_then(|t| t.grid().ok());
+        let reason = match (region.reason, &grid) {
+            (StatusReason::Ok, None) => StatusReason::Unsupported,
+            (r, _) => r,
+        };
+        let period = rig.frame_period_s();
+        let mut slews = [None; MAX_SERVOS];
+        let mut targets = [0u16; MAX_SERVOS];
+        let mut channels = 0;
+        for servo in rig.servos() {
+            let ch = usize::from(servo.channel);
+            if let (Some(slot), Some(t)) = (slews.get_mut(ch), targets.get_mut(ch)) {
+                let slew = Slew::for_channel(
+                    &servo.calibration(),
+                    servo.step_limits(period),
+                    servo.rest_us,
+                );
+                *t = slew.position();
+                *slot = Some(slew);
+                channels = channels.max(ch + 1);
+            }
+        }
+        let angles = rig.rest_angles().ok()?;
+        Some(Self {
+            rig,
+            table: region.table.as_ref(),
+            grid,
+            reason,
+            solver: Solver::DEFAULT,
+            receiver: Receiver::new(),
+            armed: false,
+            resting: true,
+            last_frame_us: 0,
+            last_tracker_us: None,
+            params: [0.0; MAX_PARAMS],
+            dials: List::new(),
+            weights: [None; MAX_GOALS],
+            boresight: [Quat::IDENTITY; MAX_SENSORS],
+            last_sensors: List::new(),
+            goals: GoalSet::new(),
+            angles,
+            synth: Pose::default(),
+            pose: *rig.rest_pose(),
+            local: LocalPose::default(),
+            slews,
+            targets,
+            channels,
+            residuals: [0.0; MAX_GOALS],
+            stages: [0; STAGES],
+            frames_out: 0,
+            adjusted: 0,
+            failed_frames: 0,
+            disarms: 0,
+        })
+    }
+
+    /// The rig's frame period, µs: call [`Performer::tick`] this often.
+    #[must_use]
+    pub fn frame_period_us(&self) -> u32 {
+        self.rig.frame_period_us()
+    }
+
+    /// The servo targets by channel, quarter-µs (0: channel unused).
+    #[must_use]
+    pub fn targets(&self) -> &[u16] {
+        self.targets.get(..self.channels).unwrap_or(&[])
+    }
+
+    /// Whether the servo outputs are enabled.
+    #[must_use]
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+
+    /// Why the board cannot arm ([`StatusReason::Ok`] if it can).
+    #[must_use]
+    pub fn reason(&self) -> StatusReason {
+        self.reason
+    }
+
+    /// The receive path's error counters.
+    #[must_use]
+    pub fn errors(&self) -> &ErrorCounters {
+        self.receiver.errors()
+    }
+
+    /// Frames whose parameters had to be clamped or projected into the table.
+    #[must_use]
+    pub fn adjusted_frames(&self) -> u32 {
+        self.adjusted
+    }
+
+    /// Frames dropped because synthesis or solving failed (targets held).
+    #[must_use]
+    pub fn failed_frames(&self) -> u32 {
+        self.failed_frames
+    }
+
+    /// The current world pose of the figure (solved, or rest).
+    #[must_use]
+    pub fn pose(&self) -> &Pose<MAX_SEGMENTS> {
+        &self.pose
+    }
+
+    /// The board's status message.
+    #[must_use]
+    pub fn status(&self) -> Status {
+        Status {
+            protocol_version: PROTOCOL_VERSION,
+            armed: self.armed,
+            table_ok: self.reason == StatusReason::Ok,
+            reason: self.reason,
+            errors: *self.receiver.errors(),
+            frames_ok: self.receiver.frames_ok(),
+        }
+    }
+
+    /// Feeds received bytes, advancing `input` past what was consumed, until
+    /// one message has been handled; call again while `input` is not empty.
+    /// `now_us` is the board clock.
+    pub fn receive(&mut self, input: &mut &[u8], now_us: u32, cycles: &mut dyn Cycles) -> Update {
+        let start = cycles.now();
+        let none = Update {
+            outputs: None,
+            reply: None,
+        };
+        let Some(incoming) = self.receiver.push_slice(input) else {
+            return none;
+        };
+        let decoded = cycles.now();
+        match incoming {
+            Incoming::Hello { accepted, .. } => {
+                if !accepted {
+                    self.reason = StatusReason::ProtocolMismatch;
+                    self.armed = false;
+                }
+                Update {
+                    outputs: None,
+                    reply: Some(Message::Status(self.status())),
+                }
+            }
+            Incoming::Params(p) => {
+                self.dials = List::from_slice(p.values()).unwrap_or_default();
+                none
+            }
+            Incoming::Command(c) => Update {
+                outputs: None,
+                reply: Some(self.command(c)),
+            },
+            Incoming::Tracker(frame) => {
+                self.stages[stage::DECODE] = decoded.wrapping_sub(start);
+                self.last_frame_us = now_us;
+                self.frame(&frame, cycles, start)
+            }
+        }
+    }
+
+    /// Called by the board every frame period: eases to rest after the
+    /// fail-safe time-out or a disarm. Returns outputs only when they moved.
+    pub fn tick(&mut self, now_us: u32) -> Update {
+        let timeout_us = self.rig.failsafe_timeout_ms().saturating_mul(1000);
+        let lost = self.armed && now_us.wrapping_sub(self.last_frame_us) >= timeout_us;
+        if (lost || !self.armed) && !self.resting {
+            let moved = self.ease_to_rest();
+            return Update {
+                outputs: moved.then_some(Cause::Rest),
+                reply: None,
+            };
+        }
+        Update {
+            outputs: None,
+            reply: None,
+        }
+    }
+
+    fn disarm(&mut self) {
+        self.armed = false;
+        self.disarms = self.disarms.wrapping_add(1);
+    }
+
+    /// How many `Disarm` commands the loop has obeyed.
+    #[must_use]
+    pub fn disarms(&self) -> u32 {
+        self.disarms
+    }
+
+    /// Whether every servo is at its rest pulse and still.
+    #[must_use]
+    pub fn resting(&self) -> bool {
+        self.resting
+    }
+
+    fn command(&mut self, c: ValidCommand) -> Message {
+        let ok = match c.kind() {
+            CommandKind::Arm => {
+                self.armed = self.reason == StatusReason::Ok;
+                self.armed
+            }
+            CommandKind::Disarm => {
+                self.disarm();
+                true
+            }
+            CommandKind::SelectTable(n) => n == 0 && self.reason == StatusReason::Ok,
+            CommandKind::SelectClip(_) => false,
+            CommandKind::SetGoalWeight { goal, weight } => {
+                match self.weights.get_mut(usize::from(goal)) {
+                    Some(w) => {
+                        *w = Some(weight);
+                        true
+                    }
+                    None => false,
+                }
+            }
+            CommandKind::Boresight { sensor } => self.boresight(sensor),
+            CommandKind::RequestStatus => return Message::Status(self.status()),
+        };
+        Message::Ack(Ack { seq: c.seq(), ok })
+    }
+
+    /// Takes sensor `id`'s last orientation as its zero.
+    fn boresight(&mut self, id: u8) -> bool {
+        let Some(s) = self.last_sensors.iter().find(|s| s.id == id) else {
+            return false;
+        };
+        let [w, x, y, z] = s.rotation;
+        match self.boresight.get_mut(usize::from(id)) {
+            Some(b) => {
+                *b = Quat::from_xyzw(x, y, z, w).conjugate();
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// One accepted tracker frame.
+    fn frame(&mut self, frame: &ValidTrackerFrame, cycles: &mut dyn Cycles, start: u32) -> Update {
+        let dt = self.frame_dt(frame.time_us());
+        self.remember(frame);
+        if !self.armed {
+            let moved = !self.resting && self.ease_to_rest();
+            return Update {
+                outputs: moved.then_some(Cause::Rest),
+                reply: None,
+            };
+        }
+        self.resting = false;
+        let t0 = cycles.now();
+        self.map();
+        let t1 = cycles.now();
+        let synthesized = self.synthesize();
+        let t2 = cycles.now();
+        let solved = synthesized && self.solve();
+        let t3 = cycles.now();
+        if solved {
+            self.drive(dt);
+        } else {
+            self.failed_frames = self.failed_frames.saturating_add(1);
+        }
+        let t4 = cycles.now();
+        self.stages[stage::MAP] = t1.wrapping_sub(t0);
+        self.stages[stage::SYNTH] = t2.wrapping_sub(t1);
+        self.stages[stage::SOLVE] = t3.wrapping_sub(t2);
+        self.stages[stage::SERVO] = t4.wrapping_sub(t3);
+        self.stages[stage::TOTAL] = t4.wrapping_sub(start);
+        self.frames_out = self.frames_out.wrapping_add(1);
+        let reply = self
+            .frames_out
+            .is_multiple_of(TELEMETRY_EVERY)
+            .then(|| self.telemetry(frame.seq()));
+        Update {
+            outputs: Some(Cause::Frame(frame.seq())),
+            reply,
+        }
+    }
+
+    /// The step length for a frame at tracker time `time_us`, seconds.
+    fn frame_dt(&mut self, time_us: u32) -> f32 {
+        let period_us = self.rig.frame_period_us();
+        let dt_us = match self.last_tracker_us {
+            Some(last) if time_us.wrapping_sub(last) < u32::MAX / 2 => {
+                time_us.wrapping_sub(last).min(period_us)
+            }
+            Some(_) => 0,
+            None => period_us,
+        };
+        self.last_tracker_us = Some(time_us);
+        dt_us as f32 * 1e-6
+    }
+
+    /// Keeps the frame's sensors, boresight-corrected, for mapping.
+    fn remember(&mut self, frame: &ValidTrackerFrame) {
+        self.last_sensors = List::new();
+        for s in frame.sensors() {
+            let b = self
+                .boresight
+                .get(usize::from(s.id()))
+                .copied()
+                .unwrap_or(Quat::IDENTITY);
+            let q = s.rotation() * b;
+            let _ = self.last_sensors.push(Sensor {
+                id: s.id(),
+                position: s.position().to_array(),
+                rotation: [q.w, q.x, q.y, q.z],
+            });
+        }
+    }
+
+    /// Sensors → parameters and goals, then dial and weight overrides.
+    fn map(&mut self) {
+        let _ = self.rig.map_sensors(
+            self.last_sensors.as_slice(),
+            &mut self.params,
+            &mut self.goals,
         );
+        for (p, d) in self.params.iter_mut().zip(self.dials.iter()) {
+            *p = *d;
+        }
+        for (g, w) in self
+            .goals
+            .as_mut_slice()
+            .iter_mut()
+            .zip(self.weights.iter())
+        {
+            if let Some(w) = w {
+                g.weight = *w;
+            }
+        }
+    }
+
+    /// Grid synthesis into the warm start. False if it failed.
+    fn synthesize(&mut self) -> bool {
+        let (Some(grid), Some(table)) = (&self.grid, self.table) else {
+            return false;
+        };
+        let n = grid.axes().len();
+        let Some(params) = self.params.get(..n) else {
+            return false;
+        };
+        let Ok(query) = grid.query(params) else {
+            return false;
+        };
+        if query.adjust() != Adjust::None {
+            self.adjusted = self.adjusted.saturating_add(1);
+        }
+        if query.pose(table, &mut self.synth).is_err() {
+            return false;
+        }
+        let body = self.rig.body();
+        if pose::to_local(&body.hierarchy(), &self.synth, &mut self.local).is_err() {
+            return false;
+        }
+        match Angles::from_local(&body, &self.local) {
+            Ok(a) => {
+                self.angles = a;
+                true
+            }
+            Err(_) => false,
+        }
+    }
+
+    /// Solves the goals from the synthesized start. False if it failed.
+    fn solve(&mut self) -> bool {
+        let body: Body<'_> = self.rig.body();
+        match solve::solve(
+            &self.solver,
+            &body,
+            &self.goals,
+            &mut self.angles,
+            &mut self.pose,
+        ) {
+            Ok(report) => {
+                for (r, x) in self.residuals.iter_mut().zip(report.residuals.iter()) {
+                    *r = *x;
+                }
+                true
+            }
+            Err(_) => false,
+        }
+    }
+
+    /// Joint angles → pulses → slew-limited targets.
+    fn drive(&mut self, dt: f32) {
+        for servo in self.rig.servos() {
+            let ch = usize::from(servo.channel);
+            let (Some(Some(slew)), Some(t)) = (self.slews.get_mut(ch), self.targets.get_mut(ch))
+            else {
+                continue;
+            };
+            let angle = Rig::servo_angle(servo, &self.angles).unwrap_or(f32::NAN);
+            let target = quarter_us(servo.calibration().pulse_us(angle));
+            slew.set_limits(servo.step_limits(dt));
+            *t = slew.update(target);
+        }
+    }
+
+    /// One rest-ward step of every servo at the frame period. True if any
+    /// target moved.
+    fn ease_to_rest(&mut self) -> bool {
+        let period = self.rig.frame_period_s();
+        let mut moved = false;
+        let mut all_rest = true;
+        for servo in self.rig.servos() {
+            let ch = usize::from(servo.channel);
+            let (Some(Some(slew)), Some(t)) = (self.slews.get_mut(ch), self.targets.get_mut(ch))
+            else {
+                continue;
+            };
+            let rest = quarter_us(servo.rest_us);
+            slew.set_limits(servo.step_limits(period));
+            let next = slew.update(rest);
+            moved |= next != *t;
+            all_rest &= next == rest && slew.last_step() == 0;
+            *t = next;
+        }
+        self.resting = all_rest;
+        moved
+    }
+
+    fn telemetry(&self, seq: u32) -> Message {
+        Message::Telemetry(Telemetry {
+            seq,
+            servo_targets: List::from_slice(self.targets()).unwrap_or_default(),
+            goal_residuals: List::from_slice(
+                self.residuals
+                    .get(..self.goals.as_slice().len())
+                    .unwrap_or(&[]),
+            )
+            .unwrap_or_default(),
+            stage_counts: self.stages,
+            errors: *self.receiver.errors(),
+        })
     }
 }

@@ -72,7 +72,8 @@ impl Calibration {
         let u = u.clamp(0.0, 1.0);
         let u = if self.reversed { 1.0 - u } else { u };
         let pulse = self.pulse_min_us + u * (self.pulse_max_us - self.pulse_min_us) + self.trim_us;
-        pulse.clamp(self.pulse_low(), self.pulse_high())
+        // max/min, not clamp: clamp asserts its bounds (a panic path).
+        pulse.max(self.pulse_low()).min(self.pulse_high())
     }
 
     /// The lowest pulse this channel may ever receive, µs.
@@ -166,7 +167,7 @@ impl Slew {
             low,
             high,
             limits,
-            position: start.clamp(low, high),
+            position: start.max(low).min(high),
             step: 0,
         }
     }
@@ -180,6 +181,21 @@ impl Slew {
             limits,
             quarter_us(start_us),
         )
+    }
+
+    /// Replaces the speed and acceleration limits (for example when the
+    /// frame period changes); the position and the last step are kept.
+    pub fn set_limits(&mut self, limits: StepLimits) {
+        self.limits = StepLimits {
+            max_step: limits.max_step.max(1),
+            max_accel: limits.max_accel.max(1),
+        };
+    }
+
+    /// The limits in force.
+    #[must_use]
+    pub fn limits(&self) -> StepLimits {
+        self.limits
     }
 
     /// The pulse last sent, quarter-µs.
@@ -196,7 +212,9 @@ impl Slew {
 
     /// Moves one frame towards `target` (quarter-µs) and returns the new pulse.
     pub fn update(&mut self, target: u16) -> u16 {
-        let target = i32::from(target.clamp(self.low, self.high));
+        // max/min rather than clamp throughout: clamp asserts lo ≤ hi, a
+        // panic path the optimizer cannot always remove.
+        let target = i32::from(target.max(self.low).min(self.high));
         let here = i32::from(self.position);
         let vmax = i32::from(self.limits.max_step);
         let amax = i32::from(self.limits.max_accel);
@@ -206,9 +224,13 @@ impl Slew {
         let brake = stopping_speed(dist.unsigned_abs(), amax);
         let wanted = dist.signum() * dist.abs().min(brake).min(vmax);
         let step = wanted
-            .clamp(self.step - amax, self.step + amax)
-            .clamp(-vmax, vmax);
-        let next = (here + step).clamp(i32::from(self.low), i32::from(self.high));
+            .max(self.step - amax)
+            .min(self.step + amax)
+            .max(-vmax)
+            .min(vmax);
+        let next = (here + step)
+            .max(i32::from(self.low))
+            .min(i32::from(self.high));
         self.step = next - here;
         self.position = next as u16;
         self.position

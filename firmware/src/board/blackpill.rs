@@ -237,6 +237,10 @@ impl Board for BlackPill {
         self.micros.update()
     }
 
+    fn cycles(&mut self) -> u32 {
+        cortex_m::peripheral::DWT::cycle_count()
+    }
+
     fn feed_watchdog(&mut self) {
         self.watchdog.feed();
         // The loop feeds far more often than the 43 s counter wrap.

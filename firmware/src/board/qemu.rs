@@ -172,8 +172,17 @@ impl Board for Qemu {
 
     fn feed_watchdog(&mut self) {}
 
+    /// Ticks of the 25 MHz timer 0 (under `-icount shift=7`, 3.2 per
+    /// instruction).
+    fn cycles(&mut self) -> u32 {
+        u32::MAX - reg_read(TIMER0_BASE + 0x04)
+    }
+
+    const ENDS_ON_DISARM: bool = true;
+
     fn finish(&mut self, outcome: Outcome) -> ! {
         let _ = embedded_io::Write::flush(&mut self.servo);
+        let _ = embedded_io::Write::flush(&mut self.tracker);
         exit(outcome.exit_status())
     }
 }

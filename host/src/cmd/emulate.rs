@@ -1,23 +1,36 @@
 //! `marionette emulate`: a performance on the emulated board.
 //!
-//! Boots the `perform` firmware on QEMU, streams a dial sweep over the tracker
-//! link as fast as the link takes it, decodes the Pololu Maestro commands that
-//! come back on the servo bus, and checks every one against the core run
-//! natively on the same input.
+//! Boots the `perform` firmware on QEMU with the rig and tables in its table
+//! region, streams a tracker recording over UART0, decodes the Pololu Maestro
+//! commands that come back on UART1, and checks the targets of every tracker
+//! frame against the core run natively on the same session
+//! (`marionette sim`): they must be bit-identical.
 
 use super::CmdError;
-use crate::qemu::{self, Config};
-use marionette_core::frame::{DIAL_END, DIAL_MAX, dial_step};
-use marionette_core::servo::{Calibration, maestro};
+use super::sim::{self, Inputs};
+use crate::perform;
 use serde::Serialize;
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Arguments of `marionette emulate`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Number of frames to stream.
-    #[arg(long, default_value_t = 2000)]
-    pub frames: u32,
+    /// The rig file.
+    #[arg(long, default_value = "rigs/humanoid16.toml")]
+    pub rig: PathBuf,
+    /// The table blob (`marionette build`); without it the board does not arm.
+    #[arg(long)]
+    pub tables: Option<PathBuf>,
+    /// The tracker recording (CSV).
+    #[arg(long)]
+    pub recording: PathBuf,
+    /// Where to write `servo_emulated.csv` and `region.bin`.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Also save the raw servo-bus bytes here.
+    #[arg(long)]
+    pub raw_servo: Option<PathBuf>,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
@@ -26,87 +39,88 @@ pub struct Args {
 /// The summary of a run.
 #[derive(Debug, Serialize)]
 pub struct Summary {
-    /// Frames streamed.
+    /// Tracker frames streamed.
     pub frames: usize,
-    /// Servo commands received from the board.
-    pub commands: usize,
-    /// Commands that differ from the native core's (missing ones count too).
+    /// Output frames the board sent for them.
+    pub frame_outputs: usize,
+    /// Output frames that differ from the native core's (missing ones count).
     pub mismatches: usize,
-    /// Lowest pulse commanded, µs.
-    pub pulse_min_us: f64,
-    /// Highest pulse commanded, µs.
-    pub pulse_max_us: f64,
-    /// The firmware's exit status.
-    pub exit_status: Option<i32>,
-    /// Wall-clock seconds for the run, including boot.
+    /// Easing steps to rest after the session.
+    pub rest_steps: usize,
+    /// Replies (status, acks, telemetry) decoded from the board.
+    pub replies: usize,
+    /// Per-channel [min, max] target, µs.
+    pub ranges_us: Vec<[f64; 2]>,
+    /// The servo CSV written.
+    pub servo_csv: String,
+    /// Wall-clock seconds, including boot.
     pub seconds: f64,
 }
 
-/// The dial input: one slow sweep up and down, as a performer turning a knob.
-#[must_use]
-pub fn dial_sweep(frames: u32) -> Vec<u16> {
-    (0..frames)
-        .map(|i| {
-            let phase = f64::from(i) / f64::from(frames.max(1)) * std::f64::consts::TAU;
-            ((1.0 - phase.cos()) * 0.5 * f64::from(DIAL_MAX)).round() as u16
-        })
-        .collect()
-}
-
-/// Streams `dials` to the emulated board and compares its servo commands with
-/// the native core's.
-pub fn perform(dials: &[u16]) -> Result<Summary, CmdError> {
+/// Runs the session on the emulated board and natively, and compares them.
+pub fn compare(
+    inputs: &Inputs,
+    out: &std::path::Path,
+) -> Result<(perform::Run, Summary, Vec<u8>), CmdError> {
     let start = Instant::now();
-    let elf = qemu::build_firmware("perform")?;
-    let mut input: Vec<u8> = dials.iter().flat_map(|d| d.to_le_bytes()).collect();
-    input.extend_from_slice(&DIAL_END.to_le_bytes());
-    let out = qemu::run(&Config::new(elf), &input)?;
-    let cal = Calibration::HOBBY_180;
-    let commands: Vec<[u8; 4]> = out
-        .servo
-        .chunks_exact(4)
-        .filter_map(|c| c.try_into().ok())
-        .collect();
-    let differing = dials
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let region_file = out.join("region.bin");
+    std::fs::write(&region_file, &inputs.region)
+        .map_err(|e| format!("{}: {e}", region_file.display()))?;
+    let native = perform::simulate(&inputs.region, &inputs.session)?;
+    let channels = native.frame_targets.first().map_or(1, Vec::len);
+    let expected = native.frame_targets.len();
+    let (board, raw) = perform::emulate(
+        &region_file,
+        &inputs.session,
+        channels,
+        expected,
+        std::time::Duration::ZERO,
+    )?;
+    let differing = native
+        .frame_targets
         .iter()
-        .zip(&commands)
-        .filter(|(d, c)| dial_step(**d, &cal) != **c)
+        .zip(&board.frame_targets)
+        .filter(|(a, b)| a != b)
         .count();
-    let pulses: Vec<f64> = commands
-        .iter()
-        .filter_map(|c| maestro::decode_set_target(*c))
-        .map(|(_, q)| f64::from(q) / 4.0)
-        .collect();
-    Ok(Summary {
-        frames: dials.len(),
-        commands: commands.len(),
-        mismatches: differing + dials.len().abs_diff(commands.len()),
-        pulse_min_us: pulses.iter().copied().fold(f64::INFINITY, f64::min),
-        pulse_max_us: pulses.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-        exit_status: out.status,
+    let csv = out.join("servo_emulated.csv");
+    sim::write_servo_csv(&csv, inputs, &board)?;
+    let summary = Summary {
+        frames: inputs.frames,
+        frame_outputs: board.frame_targets.len(),
+        mismatches: differing + expected.abs_diff(board.frame_targets.len()),
+        rest_steps: board.rest_targets.len(),
+        replies: board.replies.len(),
+        ranges_us: sim::ranges(&board),
+        servo_csv: csv.display().to_string(),
         seconds: start.elapsed().as_secs_f64(),
-    })
+    };
+    Ok((board, summary, raw))
 }
 
 /// Runs the performance and prints its summary.
 pub fn run(args: &Args) -> Result<(), CmdError> {
-    let summary = perform(&dial_sweep(args.frames))?;
+    let inputs = sim::load(&args.rig, args.tables.as_deref(), &args.recording)?;
+    let (_, summary, raw) = compare(&inputs, &args.out)?;
+    if let Some(path) = &args.raw_servo {
+        std::fs::write(path, raw).map_err(|e| format!("{}: {e}", path.display()))?;
+    }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
         println!(
-            "emulated board: {} frames in, {} servo commands out ({:.0}–{:.0} µs), \
-             {} differ from the native core; exit status {:?}; {:.1} s",
+            "emulated board: {} tracker frames in, {} servo frames out, {} differ from the native core, \
+             {} steps to rest, {} replies; servo curves in {} ({:.1} s)",
             summary.frames,
-            summary.commands,
-            summary.pulse_min_us,
-            summary.pulse_max_us,
+            summary.frame_outputs,
             summary.mismatches,
-            summary.exit_status,
+            summary.rest_steps,
+            summary.replies,
+            summary.servo_csv,
             summary.seconds
         );
     }
-    if summary.mismatches > 0 || summary.exit_status != Some(0) {
+    if summary.mismatches > 0 {
         return Err("the emulated board's servo output differs from the native core".into());
     }
     Ok(())

@@ -1,12 +1,16 @@
 //! One module per `marionette` subcommand. Each has an `Args` (clap) and a
 //! `run(&Args) -> Result<(), CmdError>`.
 
+pub mod build;
 pub mod emulate;
 pub mod flash;
 pub mod icount;
+pub mod sim;
+pub mod inspect;
 pub mod plot;
 pub mod render;
 pub mod solve;
+pub mod synth;
 
 /// An error from any subcommand, printed by `main` as `marionette: <error>`.
 pub type CmdError = Box<dyn std::error::Error + Send + Sync>;

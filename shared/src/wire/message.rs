@@ -172,6 +172,14 @@ pub enum StatusReason {
     BadBounds,
     /// Tag 6: the host's `Hello` carried another protocol version.
     ProtocolMismatch,
+    /// Tag 7: no valid rig blob in flash (nothing to drive).
+    NoRig,
+    /// Tag 8: the table was built for another rig (rig hash or segment count
+    /// differ).
+    RigMismatch,
+    /// Tag 9: the table is valid but of a kind this firmware cannot perform
+    /// (for example a clip table where a static grid is needed).
+    Unsupported,
 }
 
 /// The board's state and counters.

@@ -1,0 +1,154 @@
+//! `marionette sim`: the live loop run natively on a recording.
+//!
+//! Reads a rig file, a table blob and a tracker recording
+//! (`time_us,sensor,x,y,z,qw,qx,qy,qz`), runs the session through the core's
+//! `Performer` exactly as the firmware would, and writes the servo targets
+//! per frame as CSV (`time_us,ch0,…` in µs).
+
+use super::CmdError;
+use crate::perform::{self, Run};
+use crate::{import, rigfile};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `marionette sim`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The rig file.
+    #[arg(long, default_value = "rigs/humanoid16.toml")]
+    pub rig: PathBuf,
+    /// The table blob (`marionette build`); without it the rig does not arm.
+    #[arg(long)]
+    pub tables: Option<PathBuf>,
+    /// The tracker recording (CSV).
+    #[arg(long)]
+    pub recording: PathBuf,
+    /// Where to write `servo.csv`.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A summary of a run.
+#[derive(Debug, Serialize)]
+pub struct Summary {
+    /// Tracker frames in the recording.
+    pub frames: usize,
+    /// Output frames driven by tracker frames.
+    pub frame_outputs: usize,
+    /// Easing steps to rest after the session.
+    pub rest_steps: usize,
+    /// Servo channels.
+    pub channels: usize,
+    /// Lowest and highest target per channel, µs.
+    pub ranges_us: Vec<[f64; 2]>,
+    /// The servo CSV written.
+    pub servo_csv: String,
+}
+
+/// The inputs of a performance, loaded.
+pub struct Inputs {
+    /// The table-region image (rig blob + table blob).
+    pub region: Vec<u8>,
+    /// The session to send.
+    pub session: Vec<perform::Sent>,
+    /// Tracker frames in it.
+    pub frames: usize,
+    /// Frame times, µs.
+    pub times: Vec<u32>,
+    /// The rig's frame period, µs.
+    pub period_us: u32,
+}
+
+/// Loads the rig, tables and recording into a region image and a session.
+pub fn load(rig: &Path, tables: Option<&Path>, recording: &Path) -> Result<Inputs, CmdError> {
+    let rig = rigfile::load(&rigfile::resolve(rig))?;
+    let rig_blob = rigfile::to_blob(&rig)?;
+    let table_blob = match tables {
+        Some(t) => Some(std::fs::read(t).map_err(|e| format!("{}: {e}", t.display()))?),
+        None => None,
+    };
+    let samples = import::csv::read_tracker_csv(recording)?;
+    let frames = perform::frames(&samples)?;
+    Ok(Inputs {
+        region: perform::region(&rig_blob, table_blob.as_deref()),
+        session: perform::session(&frames)?,
+        frames: frames.len(),
+        times: frames.iter().map(|f| f.time_us).collect(),
+        period_us: rig.desc().frame_period_us,
+    })
+}
+
+/// Writes a run's targets as `time_us,ch0,…` (µs) to `path`.
+pub fn write_servo_csv(path: &Path, inputs: &Inputs, run: &Run) -> Result<(), CmdError> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    let channels = run.frame_targets.first().map_or(0, Vec::len);
+    let mut text = String::from("time_us");
+    for c in 0..channels {
+        text.push_str(&format!(",ch{c}"));
+    }
+    text.push('\n');
+    let last = inputs.times.last().copied().unwrap_or(0);
+    let rest_times = (1..).map(|k: u32| last.wrapping_add(k.wrapping_mul(inputs.period_us)));
+    let times = inputs.times.iter().copied().chain(rest_times);
+    for (t, targets) in times.zip(run.frame_targets.iter().chain(&run.rest_targets)) {
+        text.push_str(&t.to_string());
+        for q in targets {
+            text.push_str(&format!(",{}", f64::from(*q) / 4.0));
+        }
+        text.push('\n');
+    }
+    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()).into())
+}
+
+/// Per-channel [min, max] of the targets, µs.
+#[must_use]
+pub fn ranges(run: &Run) -> Vec<[f64; 2]> {
+    let channels = run.frame_targets.first().map_or(0, Vec::len);
+    (0..channels)
+        .map(|c| {
+            let values = run
+                .frame_targets
+                .iter()
+                .chain(&run.rest_targets)
+                .filter_map(|t| t.get(c));
+            values.fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], q| {
+                let us = f64::from(*q) / 4.0;
+                [lo.min(us), hi.max(us)]
+            })
+        })
+        .collect()
+}
+
+/// Runs the session natively and writes the servo curves.
+pub fn run(args: &Args) -> Result<(), CmdError> {
+    let inputs = load(&args.rig, args.tables.as_deref(), &args.recording)?;
+    let run = perform::simulate(&inputs.region, &inputs.session)?;
+    let csv = args.out.join("servo_sim.csv");
+    write_servo_csv(&csv, &inputs, &run)?;
+    let summary = Summary {
+        frames: inputs.frames,
+        frame_outputs: run.frame_targets.len(),
+        rest_steps: run.rest_targets.len(),
+        channels: run.frame_targets.first().map_or(0, Vec::len),
+        ranges_us: ranges(&run),
+        servo_csv: csv.display().to_string(),
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        println!(
+            "sim: {} frames, {} output frames, {} steps to rest, {} channels; servo curves in {}",
+            summary.frames,
+            summary.frame_outputs,
+            summary.rest_steps,
+            summary.channels,
+            summary.servo_csv
+        );
+    }
+    Ok(())
+}

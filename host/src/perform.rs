@@ -1,0 +1,293 @@
+//! A performance, driven from the host: one session of wire messages, run
+//! natively through the core's [`Performer`] (`marionette sim`) or on the
+//! emulated board (`marionette emulate`), and the comparison of the two.
+//!
+//! A session is the byte stream a tracker bridge sends: `Hello`, `Arm`, one
+//! `TrackerFrame` per recorded time step, and finally `Disarm`. The table
+//! region holds the rig blob followed by the table blob at the next 4-byte
+//! boundary ([`region`]), exactly as the firmware reads it.
+//!
+//! The native run uses each frame's timestamp as the board clock and calls
+//! [`Performer::tick`] at the rig's frame period in the gaps, as the firmware
+//! does with its own clock. The emulated board streams as fast as its UART
+//! takes the bytes, so its clock never reaches the fail-safe time-out while
+//! frames are flowing: the servo targets of every tracker frame must be
+//! bit-identical between the two.
+
+use crate::import::csv::TrackerSample;
+use crate::qemu::{self, Config, QemuError};
+use marionette_core::frame::{Cause, NoCycles, Performer, Region, Update};
+use marionette_core::servo::maestro;
+use marionette_core::wire::{
+    self, Command, CommandKind, Hello, List, MAX_FRAME, MAX_SENSORS, Message, PROTOCOL_VERSION,
+    Sensor, TrackerFrame, WireError,
+};
+use std::path::Path;
+use std::time::Duration;
+
+/// Errors of a host-driven performance.
+#[derive(Debug, thiserror::Error)]
+pub enum PerformError {
+    /// The table region holds no valid rig.
+    #[error("the table region holds no valid rig blob")]
+    NoRig,
+    /// A recording has more sensors in one time step than a frame carries.
+    #[error(
+        "recording: {count} sensors at time {time_us} µs; a tracker frame carries at most {MAX_SENSORS}"
+    )]
+    TooManySensors {
+        /// The time step.
+        time_us: u64,
+        /// Sensors found.
+        count: usize,
+    },
+    /// A message could not be encoded.
+    #[error("encoding a wire message: {0:?}")]
+    Wire(WireError),
+    /// The emulator failed.
+    #[error(transparent)]
+    Qemu(#[from] QemuError),
+    /// A file could not be written or read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// What went wrong.
+        source: std::io::Error,
+    },
+}
+
+/// The table region image: the rig blob, zero padding to 4 bytes, the table
+/// blob (if any).
+#[must_use]
+pub fn region(rig_blob: &[u8], table_blob: Option<&[u8]>) -> Vec<u8> {
+    let mut out = rig_blob.to_vec();
+    out.resize(out.len().next_multiple_of(4), 0);
+    if let Some(t) = table_blob {
+        out.extend_from_slice(t);
+    }
+    out
+}
+
+/// Groups tracker samples into frames, one per distinct timestamp, in time
+/// order (sequence numbers from 1).
+pub fn frames(samples: &[TrackerSample]) -> Result<Vec<TrackerFrame>, PerformError> {
+    let mut sorted: Vec<&TrackerSample> = samples.iter().collect();
+    sorted.sort_by_key(|s| (s.time_us, s.sensor));
+    let mut out: Vec<TrackerFrame> = Vec::new();
+    for group in sorted.chunk_by(|a, b| a.time_us == b.time_us) {
+        let time_us = group.first().map_or(0, |s| s.time_us);
+        let mut sensors = List::new();
+        for s in group {
+            let q = s.orientation;
+            let sensor = Sensor {
+                id: s.sensor,
+                position: s.position.as_vec3().to_array(),
+                rotation: [q.w as f32, q.x as f32, q.y as f32, q.z as f32],
+            };
+            sensors
+                .push(sensor)
+                .map_err(|_| PerformError::TooManySensors {
+                    time_us,
+                    count: group.len(),
+                })?;
+        }
+        let seq = u32::try_from(out.len() + 1).unwrap_or(u32::MAX);
+        out.push(TrackerFrame {
+            seq,
+            time_us: time_us as u32,
+            sensors,
+        });
+    }
+    Ok(out)
+}
+
+/// One message of a session, with the board-clock time at which it is sent.
+#[derive(Clone, Debug)]
+pub struct Sent {
+    /// Board-clock time, µs (the frame's own timestamp for tracker frames).
+    pub time_us: u32,
+    /// The encoded wire frame.
+    pub bytes: Vec<u8>,
+}
+
+/// Encodes a message as one wire frame, preceded by a `0x00` delimiter so
+/// that the board resynchronises even after line noise that did not end in
+/// one (an empty frame is ignored by the receiver).
+pub fn encode(msg: &Message) -> Result<Vec<u8>, PerformError> {
+    let mut buf = [0u8; MAX_FRAME];
+    let frame = wire::encode(msg, &mut buf).map_err(PerformError::Wire)?;
+    let mut out = Vec::with_capacity(frame.len() + 1);
+    out.push(0);
+    out.extend_from_slice(frame);
+    Ok(out)
+}
+
+/// The session for a recording: `Hello`, `Arm`, the frames, `Disarm`. The
+/// host's sequence numbers are shared by frames and commands.
+pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
+    let first = frames.first().map_or(0, |f| f.time_us);
+    let last = frames.last().map_or(0, |f| f.time_us);
+    let n = u32::try_from(frames.len()).unwrap_or(u32::MAX);
+    let mut out = vec![
+        Sent {
+            time_us: first,
+            bytes: encode(&Message::Hello(Hello {
+                protocol_version: PROTOCOL_VERSION,
+            }))?,
+        },
+        Sent {
+            time_us: first,
+            bytes: encode(&Message::Command(Command {
+                seq: 0,
+                kind: CommandKind::Arm,
+            }))?,
+        },
+    ];
+    for f in frames {
+        out.push(Sent {
+            time_us: f.time_us,
+            bytes: encode(&Message::TrackerFrame(*f))?,
+        });
+    }
+    let disarm = Command {
+        seq: n.wrapping_add(1),
+        kind: CommandKind::Disarm,
+    };
+    out.push(Sent {
+        time_us: last,
+        bytes: encode(&Message::Command(disarm))?,
+    });
+    Ok(out)
+}
+
+/// Everything a performance produced.
+#[derive(Clone, Debug, Default)]
+pub struct Run {
+    /// Servo targets (quarter-µs by channel) of each accepted tracker frame.
+    pub frame_targets: Vec<Vec<u16>>,
+    /// Servo targets of each easing step after the frames (fail-safe or
+    /// disarm), in order.
+    pub rest_targets: Vec<Vec<u16>>,
+    /// Replies the board sent (decoded).
+    pub replies: Vec<Message>,
+}
+
+/// Runs a session natively through the core.
+pub fn simulate(region_bytes: &[u8], session: &[Sent]) -> Result<Run, PerformError> {
+    let region = Region::parse(region_bytes);
+    let mut performer = Performer::new(&region).ok_or(PerformError::NoRig)?;
+    let period = performer.frame_period_us().max(1);
+    let mut run = Run::default();
+    let mut clock = session.first().map_or(0, |s| s.time_us);
+    for sent in session {
+        // Board-clock ticks in the gap before this message.
+        while sent.time_us.wrapping_sub(clock) >= period
+            && sent.time_us.wrapping_sub(clock) < u32::MAX / 2
+        {
+            clock = clock.wrapping_add(period);
+            let update = performer.tick(clock);
+            record(&mut run, &performer, update);
+        }
+        let mut input = sent.bytes.as_slice();
+        while !input.is_empty() {
+            let update = performer.receive(&mut input, sent.time_us, &mut NoCycles);
+            record(&mut run, &performer, update);
+        }
+    }
+    // After the session: tick until every servo is at rest (bounded).
+    for _ in 0..100_000 {
+        if performer.resting() {
+            break;
+        }
+        clock = clock.wrapping_add(period);
+        let update = performer.tick(clock);
+        record(&mut run, &performer, update);
+    }
+    Ok(run)
+}
+
+fn record(run: &mut Run, performer: &Performer<'_, '_>, update: Update) {
+    match update.outputs {
+        Some(Cause::Frame(_)) => run.frame_targets.push(performer.targets().to_vec()),
+        Some(Cause::Rest) => run.rest_targets.push(performer.targets().to_vec()),
+        None => {}
+    }
+    if let Some(reply) = update.reply {
+        run.replies.push(reply);
+    }
+}
+
+/// Runs a session on the emulated board with `region_file` in its table
+/// region, streaming as fast as the link takes it. `channels` is the number
+/// of servo channels per output frame (the rig's highest channel + 1) and
+/// `frames` the number of frame-driven outputs expected. The last message
+/// (the `Disarm`) is sent after the board has answered every frame and a
+/// further `pause` (a pause longer than the fail-safe time-out exercises it).
+pub fn emulate(
+    region_file: &Path,
+    session: &[Sent],
+    channels: usize,
+    frames: usize,
+    pause: Duration,
+) -> Result<(Run, Vec<u8>), PerformError> {
+    let elf = qemu::build_firmware("perform")?;
+    let config = Config {
+        tables: Some(region_file.to_path_buf()),
+        timeout: Duration::from_secs(120),
+        ..Config::new(elf)
+    };
+    let mut emulator = qemu::Emulator::start(&config)?;
+    let (body, last) = session.split_at(session.len().saturating_sub(1));
+    for sent in body {
+        emulator.send(&sent.bytes)?;
+    }
+    // Let the board finish the frames before it is told to stop.
+    emulator.wait_servo_bytes(frames * channels * 4)?;
+    std::thread::sleep(pause);
+    for sent in last {
+        emulator.send(&sent.bytes)?;
+    }
+    let out = emulator.finish()?;
+    let mut targets = decode_maestro(&out.servo, channels);
+    let rest = targets.split_off(frames.min(targets.len()));
+    let replies = decode_replies(&out.tracker);
+    Ok((
+        Run {
+            frame_targets: targets,
+            rest_targets: rest,
+            replies,
+        },
+        out.servo,
+    ))
+}
+
+/// Splits a Maestro Set Target byte stream into output frames of `channels`
+/// targets each (a trailing partial frame is dropped).
+#[must_use]
+pub fn decode_maestro(bytes: &[u8], channels: usize) -> Vec<Vec<u16>> {
+    let commands: Vec<u16> = bytes
+        .chunks_exact(4)
+        .filter_map(|c| <[u8; 4]>::try_from(c).ok())
+        .filter_map(maestro::decode_set_target)
+        .map(|(_, target)| target)
+        .collect();
+    commands
+        .chunks_exact(channels.max(1))
+        .map(<[u16]>::to_vec)
+        .collect()
+}
+
+/// Decodes the board's replies from the tracker link.
+#[must_use]
+pub fn decode_replies(bytes: &[u8]) -> Vec<Message> {
+    bytes
+        .split(|b| *b == 0)
+        .filter(|f| !f.is_empty())
+        .filter_map(|f| {
+            let mut buf = f.to_vec();
+            let n = wire::cobs::decode(f, &mut buf).ok()?;
+            wire::decode_frame(buf.get(..n)?).ok()
+        })
+        .collect()
+}
