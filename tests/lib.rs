@@ -82,7 +82,10 @@ pub mod synth_ref {
     pub fn catmull_rom(p0: f64, p1: f64, p2: f64, p3: f64, s: f64) -> f64 {
         let (m1, m2) = (0.5 * (p2 - p0), 0.5 * (p3 - p1));
         let (s2, s3) = (s * s, s * s * s);
-        (2.0 * s3 - 3.0 * s2 + 1.0) * p1 + (s3 - 2.0 * s2 + s) * m1 + (-2.0 * s3 + 3.0 * s2) * p2 + (s3 - s2) * m2
+        (2.0 * s3 - 3.0 * s2 + 1.0) * p1
+            + (s3 - 2.0 * s2 + s) * m1
+            + (-2.0 * s3 + 3.0 * s2) * p2
+            + (s3 - s2) * m2
     }
 
     /// Spherical Catmull-Rom: the Barry–Goldman pyramid with exact slerp

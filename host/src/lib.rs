@@ -12,5 +12,5 @@ pub mod icount;
 pub mod import;
 pub mod perform;
 pub mod qemu;
-pub mod rigfile;
 pub mod render;
+pub mod rigfile;

@@ -5,10 +5,10 @@ pub mod build;
 pub mod emulate;
 pub mod flash;
 pub mod icount;
-pub mod sim;
 pub mod inspect;
 pub mod plot;
 pub mod render;
+pub mod sim;
 pub mod solve;
 pub mod synth;
 
