@@ -10,6 +10,8 @@
 //!   Y so that the root's forward axis points along +Z. Parameters measured
 //!   from a segment (the hand) are its position in that frame, so "hand at
 //!   (x, y, z)" means "x to the figure's left, y above the floor, z in front".
+//!   `frame = "root"` is the same with the origin at the root joint itself
+//!   (y above the root), for parameter maps in the root's frame.
 //! - **Motion tables**: each clip is cut at `cut = [first, ..., last]` into
 //!   phases, expressed in the heading frame of its first frame, and each
 //!   phase is time-resampled with [`marionette_core::clip::resample`] to the
@@ -183,6 +185,15 @@ impl Frame {
         }
     }
 
+    /// The same frame with its origin raised to the root joint.
+    #[must_use]
+    pub fn at_root(self, root: &Seg) -> Frame {
+        Frame {
+            origin: root.0,
+            ..self
+        }
+    }
+
     /// A pose in this frame.
     #[must_use]
     pub fn apply(&self, pose: &[Seg]) -> Vec<Seg> {
@@ -248,6 +259,7 @@ pub fn grid_records(spec: &Spec, m: &MocapSpec, mocap: &Mocap) -> Result<Vec<Rec
                 let world = &clip.poses[f];
                 let frame = match spec.frame {
                     FrameKind::Heading => Frame::heading(&world[0], forward, None),
+                    FrameKind::Root => Frame::heading(&world[0], forward, None).at_root(&world[0]),
                     FrameKind::World => Frame::WORLD,
                 };
                 let pose = frame.apply(world);
@@ -379,6 +391,7 @@ fn normalized_clip(
     let direction = (motion.looping && travel > 0.05).then_some(d);
     let frame = match spec.frame {
         FrameKind::Heading => Frame::heading(&start, forward, direction),
+        FrameKind::Root => Frame::heading(&start, forward, direction).at_root(&start),
         FrameKind::World => Frame::WORLD,
     };
     let span = (last - first) as f64;
@@ -440,4 +453,44 @@ fn time_resample(
         );
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn heading_and_root_frames() {
+        // Root at (1, 0.9, 2) facing +X (turned +90° about Y); a hand 0.5 m
+        // in front of it and 0.3 m to its left (+Z turned is +X, left +X
+        // turned is −Z), 1.2 m up.
+        let root = (
+            DVec3::new(1.0, 0.9, 2.0),
+            DQuat::from_rotation_y(std::f64::consts::FRAC_PI_2),
+        );
+        let hand = (DVec3::new(1.5, 1.2, 1.7), DQuat::IDENTITY);
+        let h = Frame::heading(&root, DVec3::Z, None).apply(&[root, hand]);
+        assert!(
+            (h[0].0 - DVec3::new(0.0, 0.9, 0.0)).length() < 1e-12,
+            "{:?}",
+            h[0]
+        );
+        assert!(
+            (h[1].0 - DVec3::new(0.3, 1.2, 0.5)).length() < 1e-12,
+            "{:?}",
+            h[1]
+        );
+        assert!(h[0].1.angle_between(DQuat::IDENTITY) < 1e-9);
+        let r = Frame::heading(&root, DVec3::Z, None)
+            .at_root(&root)
+            .apply(&[root, hand]);
+        assert!(
+            (r[1].0 - DVec3::new(0.3, 0.3, 0.5)).length() < 1e-12,
+            "{:?}",
+            r[1]
+        );
+        // An explicit travel direction (+X) gives the same frame.
+        let d = Frame::heading(&root, DVec3::Z, Some(DVec3::X)).apply(&[hand]);
+        assert!((d[0].0 - h[1].0).length() < 1e-12);
+    }
 }

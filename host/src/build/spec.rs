@@ -2,7 +2,9 @@
 //!
 //! ```toml
 //! kind = "grid"             # "grid" (static poses) or "clips" (motion table)
-//! frame = "heading"         # mocap: frame of the poses and parameters
+//! frame = "heading"         # mocap: frame of the poses and parameters: "heading"
+//!                           # (floor below the root, facing +Z), "root" (origin
+//!                           # at the root joint, facing +Z) or "world"
 //! # examples = "set.json"   # a JSON example set instead of mocap (see `examples`)
 //!
 //! [mocap]
@@ -97,6 +99,8 @@ pub enum FrameKind {
     /// Per frame (grid) or per clip (clips): origin on the floor below the
     /// root, yaw turned so the root faces +Z; Y stays up.
     Heading,
+    /// As `Heading`, with the origin at the root joint (y above the root).
+    Root,
     /// The mocap's world frame.
     World,
 }
@@ -408,11 +412,12 @@ impl Parser<'_> {
     fn frame(&self, frame: Option<&Spanned<String>>) -> Result<FrameKind, InputError> {
         match frame.map(|k| (k.get_ref().as_str(), k.span())) {
             None | Some(("heading", _)) => Ok(FrameKind::Heading),
+            Some(("root", _)) => Ok(FrameKind::Root),
             Some(("world", _)) => Ok(FrameKind::World),
             Some((other, span)) => self.err(
                 span,
                 "frame",
-                format!("expected \"heading\" or \"world\", found {other:?}"),
+                format!("expected \"heading\", \"root\" or \"world\", found {other:?}"),
             ),
         }
     }
