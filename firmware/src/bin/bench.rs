@@ -17,7 +17,13 @@
 use core::hint::black_box;
 use cortex_m_rt::entry;
 use glam::Quat;
+use glam::Vec3;
+use marionette_core::body::{Angles, cmu};
+use marionette_core::goal::{Goal, GoalSet, Target};
+use marionette_core::grid::{Axis, Grid, Query, SliceSamples};
 use marionette_core::math;
+use marionette_core::pose::{LocalPose, Pose};
+use marionette_core::solve::{self, Method, Solver};
 use marionette_firmware::board::qemu::exit;
 use marionette_firmware::console::Line;
 use marionette_firmware::icount::Counter;
@@ -82,6 +88,147 @@ fn slerp_rows(counter: &mut Counter) {
     report("slerp.core", "slerp.glam", PAIRS, core_ticks);
 }
 
+/// Segments in the synthesis rows: the CMU skeleton.
+const SEGMENTS: usize = 31;
+/// Samples of a trilinear window.
+const WINDOW: usize = 8;
+
+/// The trilinear tree of the baseline: glam's `Quat::slerp` (libm `sin`) and
+/// lerp, on the same window and coefficients.
+fn glam_tree(p: &[Vec3; WINDOW], q: &[Quat; WINDOW], u: [f32; 3]) -> (Vec3, Quat) {
+    let [ux, uy, uz] = u;
+    let px = [
+        p[0].lerp(p[1], ux),
+        p[2].lerp(p[3], ux),
+        p[4].lerp(p[5], ux),
+        p[6].lerp(p[7], ux),
+    ];
+    let qx = [
+        q[0].slerp(q[1], ux),
+        q[2].slerp(q[3], ux),
+        q[4].slerp(q[5], ux),
+        q[6].slerp(q[7], ux),
+    ];
+    let py = [px[0].lerp(px[1], uy), px[2].lerp(px[3], uy)];
+    let qy = [qx[0].slerp(qx[1], uy), qx[2].slerp(qx[3], uy)];
+    (py[0].lerp(py[1], uz), qy[0].slerp(qy[1], uz))
+}
+
+/// A 31-segment pose on a 2×2×2 grid: the core's query + interpolation tree
+/// against glam's slerp through the same tree.
+fn synth_rows(counter: &mut Counter) {
+    let mut rng = Lcg(0x0BAD_5EED);
+    let mut positions = [Vec3::ZERO; WINDOW * SEGMENTS];
+    let mut rotations = [Quat::IDENTITY; WINDOW * SEGMENTS];
+    for (p, q) in positions.iter_mut().zip(rotations.iter_mut()) {
+        *p = Vec3::new(rng.unit(), rng.unit(), rng.unit());
+        *q = rng.quat();
+    }
+    let axes = [Axis::linear(0.0, 1.0, 2); 3];
+    let (Ok(grid), Some(samples)) = (
+        Grid::new(&axes, None),
+        SliceSamples::new(SEGMENTS, &positions, &rotations),
+    ) else {
+        exit(4)
+    };
+    let params = black_box([0.3f32, 0.6, 0.8]);
+    let mut query = Query::default();
+    let mut pose = Pose::<SEGMENTS>::default();
+    let core_ticks = counter.ticks(|| {
+        let ok =
+            grid.query_into(&params, &mut query).is_ok() && query.pose(&samples, &mut pose).is_ok();
+        black_box(&pose);
+        ok
+    });
+    let glam_ticks = counter.ticks(|| {
+        // The baseline finds the cell by division too (step 1, origin 0).
+        let u = params.map(|x| x - math::floor(x));
+        for s in 0..SEGMENTS {
+            let p: [Vec3; WINDOW] = core::array::from_fn(|k| {
+                positions.get(k * SEGMENTS + s).copied().unwrap_or_default()
+            });
+            let q: [Quat; WINDOW] = core::array::from_fn(|k| {
+                rotations.get(k * SEGMENTS + s).copied().unwrap_or_default()
+            });
+            let (pp, qq) = glam_tree(&p, &q, u);
+            if let (Some(a), Some(b)) = (pose.positions.get_mut(s), pose.rotations.get_mut(s)) {
+                *a = pp;
+                *b = qq;
+            }
+        }
+        black_box(&pose);
+    });
+    report("synth.trilinear31.glam", "-", 1, glam_ticks);
+    report(
+        "synth.trilinear31.core",
+        "synth.trilinear31.glam",
+        1,
+        core_ticks,
+    );
+}
+
+/// The CMU skeleton reaching with both hands and feet: goals are the touch
+/// points of a perturbed pose, the start ("synthesized") is that pose perturbed
+/// by up to ±0.1 rad per joint; then the goals move by up to 2 cm and the solve
+/// warm-starts from the previous solution.
+fn solve_rows(counter: &mut Counter) {
+    let body = cmu::BODY;
+    let mut rng = Lcg(0x50_1E_5EED);
+    let Ok(mut target) = Angles::<SEGMENTS>::rest(&body) else {
+        exit(5)
+    };
+    for v in target.values.iter_mut().flat_map(|v| v.iter_mut()) {
+        *v = rng.unit() * 0.3;
+    }
+    target.clamp_to_limits(&body);
+    let mut local = LocalPose::<SEGMENTS>::default();
+    let mut pose = Pose::<SEGMENTS>::default();
+    if target.forward(&body, &mut local, &mut pose).is_err() {
+        exit(6)
+    }
+    let mut goals = GoalSet::<4>::new();
+    for name in ["LeftHand", "RightHand", "LeftFoot", "RightFoot"] {
+        let Some(seg) = body.find(name) else { exit(7) };
+        let touch = Goal::reach(seg, Vec3::ZERO, 1.0)
+            .world_point(&body, &pose)
+            .unwrap_or_default();
+        let _ = goals.push(Goal::reach(seg, touch, 1.0));
+    }
+    let mut start = target;
+    for v in start.values.iter_mut().flat_map(|v| v.iter_mut()) {
+        *v += rng.unit() * 0.1;
+    }
+    start.clamp_to_limits(&body);
+    let rows = [
+        (
+            Method::Greedy,
+            ["solve.cmu4.cold.greedy", "solve.cmu4.warm.greedy"],
+            ["-", "-"],
+        ),
+        (
+            Method::TreeDls,
+            ["solve.cmu4.cold.treedls", "solve.cmu4.warm.treedls"],
+            ["solve.cmu4.cold.greedy", "solve.cmu4.warm.greedy"],
+        ),
+    ];
+    for (method, [cold_name, warm_name], [cold_base, warm_base]) in rows {
+        let solver = Solver::DEFAULT.with_method(method);
+        let mut angles = start;
+        let cold =
+            counter.ticks(|| solve::solve(&solver, &body, &goals, &mut angles, &mut pose).is_ok());
+        let mut moved = goals.clone();
+        for g in moved.as_mut_slice() {
+            if let Target::Position(p) = &mut g.target {
+                *p += Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 0.0115;
+            }
+        }
+        let warm =
+            counter.ticks(|| solve::solve(&solver, &body, &moved, &mut angles, &mut pose).is_ok());
+        report(cold_name, cold_base, 1, cold);
+        report(warm_name, warm_base, 1, warm);
+    }
+}
+
 #[entry]
 fn main() -> ! {
     let Some(peripherals) = cortex_m::Peripherals::take() else {
@@ -90,6 +237,8 @@ fn main() -> ! {
     let mut counter = Counter::new(peripherals.SYST);
     Line::new().str("overhead ").u32(counter.overhead()).print();
     slerp_rows(&mut counter);
+    synth_rows(&mut counter);
+    solve_rows(&mut counter);
     Line::new().str("end").print();
     exit(0)
 }
