@@ -173,7 +173,7 @@ fn synth_rows(counter: &mut Counter) {
 /// warm-starts from the previous solution.
 fn solve_rows(counter: &mut Counter) {
     let body = cmu::BODY;
-    let mut rng = Lcg(0x50_1E_5EED);
+    let mut rng = Lcg(0x501E_5EED);
     let Ok(mut target) = Angles::<SEGMENTS>::rest(&body) else {
         exit(5)
     };
@@ -216,7 +216,7 @@ fn solve_rows(counter: &mut Counter) {
         let mut angles = start;
         let cold =
             counter.ticks(|| solve::solve(&solver, &body, &goals, &mut angles, &mut pose).is_ok());
-        let mut moved = goals.clone();
+        let mut moved = goals;
         for g in moved.as_mut_slice() {
             if let Target::Position(p) = &mut g.target {
                 *p += Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 0.0115;
