@@ -1,15 +1,11 @@
 //! The live loop end to end: the firmware on the emulated board against the
 //! core run natively (`marionette sim`) on the same session, the fail-safe,
 //! and line noise. The rig is the shipped `rigs/humanoid16.toml`; the table is
-//! a small grid whose every sample is the rig's rest pose (built here from the
-//! rig file, independently of the code under test), so the solver does the
-//! visible work; the recording is a synthetic right hand circling in front
-//! of the performer at 1 kHz.
+//! a small grid whose every sample is the rig's rest pose
+//! (`perform::rest_grid`), so the solver does the visible work; the recording
+//! is a synthetic right hand circling in front of the performer at 1 kHz.
 
-use glam::{DVec3, Quat, Vec3};
-use marionette_core::frame::Region;
-use marionette_core::table::{Interp, Kind, Wrap};
-use marionette_host::blob::{self, AxisSpec, TableSpec};
+use glam::DVec3;
 use marionette_host::import::csv::TrackerSample;
 use marionette_host::perform::{self, Sent};
 use marionette_host::rigfile;
@@ -29,32 +25,12 @@ struct Setup {
 
 /// A 2×2×2 grid over the hand parameters, every sample the rest pose.
 fn rest_table(rig: &rigfile::RigFile) -> Vec<u8> {
-    let rig_blob = rigfile::to_blob(rig).unwrap();
-    let region = Region::parse(&rig_blob);
-    let core_rig = region.rig.expect("the shipped rig is valid");
-    let rest = core_rig.rest_pose();
-    let n = rig.segment_names().len();
-    let pose: Vec<(Vec3, Quat)> = (0..n)
-        .map(|i| (rest.positions[i], rest.rotations[i]))
-        .collect();
-    let axis = |name: &str| AxisSpec {
-        name: name.into(),
-        min: -1.0,
-        step: 2.0,
-        count: 2,
-        wrap: Wrap::Bounded,
-        interp: Interp::Linear,
-    };
-    let spec = TableSpec {
-        rig_hash: rig.rig_hash(),
-        kind: Kind::Grid,
-        axes: vec![axis("hand_x"), axis("hand_y"), axis("hand_z")],
-        segment_names: rig.segment_names().to_vec(),
-        samples: vec![pose; 8],
-        valid: vec![true; 1],
-        durations: vec![],
-    };
-    blob::write(&spec).unwrap()
+    let axes = [
+        ("hand_x", -1.0, 2.0, 2),
+        ("hand_y", -1.0, 2.0, 2),
+        ("hand_z", -1.0, 2.0, 2),
+    ];
+    perform::rest_grid(rig, &axes).unwrap()
 }
 
 /// The performer's right hand circles in front of the pelvis tracker.

@@ -28,6 +28,8 @@ pub mod region;
 pub mod console;
 #[cfg(feature = "qemu")]
 pub mod icount;
+#[cfg(feature = "qemu")]
+pub mod stack;
 
 // Release: any reachable panic is a link error.
 #[cfg(not(debug_assertions))]

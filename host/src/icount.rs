@@ -7,6 +7,7 @@
 //! against its baseline row from the same run.
 
 use crate::qemu::{self, Config, QemuError};
+use crate::{perform, rigfile};
 use serde::Serialize;
 use std::time::Duration;
 
@@ -49,6 +50,9 @@ pub enum IcountError {
         /// The line.
         text: String,
     },
+    /// The bench's table region could not be made.
+    #[error("bench table region: {0}")]
+    Region(String),
     /// A row names a baseline that no earlier row has.
     #[error("row {row} names baseline {baseline}, which is not an earlier row")]
     UnknownBaseline {
@@ -112,12 +116,32 @@ pub fn parse(console: &str) -> Result<Vec<Row>, IcountError> {
     Ok(rows)
 }
 
-/// Builds and runs the bench firmware under `-icount` and returns its rows.
-pub fn measure() -> Result<Vec<Row>, IcountError> {
+/// The table region the bench's per-frame rows run on: the shipped
+/// `humanoid16` rig (3 parameters, 4 goals) and a 5×5×5 grid over the hand
+/// parameters whose samples are the rest pose.
+pub fn bench_region() -> Result<Vec<u8>, IcountError> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../rigs/humanoid16.toml");
+    let rig = rigfile::load(&path).map_err(|e| IcountError::Region(e.to_string()))?;
+    let blob = rigfile::to_blob(&rig).map_err(|e| IcountError::Region(e.to_string()))?;
+    let axes = [
+        ("hand_x", -0.3, 0.15, 5),
+        ("hand_y", -0.3, 0.15, 5),
+        ("hand_z", -0.1, 0.15, 5),
+    ];
+    let table = perform::rest_grid(&rig, &axes).map_err(|e| IcountError::Region(e.to_string()))?;
+    Ok(perform::region(&blob, Some(&table)))
+}
+
+/// Builds and runs the bench firmware under `-icount` and returns its
+/// console output.
+pub fn run_bench() -> Result<String, IcountError> {
     let elf = qemu::build_firmware("bench")?;
+    let mut region = tempfile::NamedTempFile::new().map_err(QemuError::Io)?;
+    std::io::Write::write_all(&mut region, &bench_region()?).map_err(QemuError::Io)?;
     let config = Config {
         icount: true,
         serial: false,
+        tables: Some(region.path().to_path_buf()),
         timeout: Duration::from_secs(300),
         ..Config::new(elf)
     };
@@ -125,7 +149,49 @@ pub fn measure() -> Result<Vec<Row>, IcountError> {
     if out.status != Some(0) {
         return Err(IcountError::Status(out.status));
     }
-    parse(&out.console)
+    Ok(out.console)
+}
+
+/// Builds and runs the bench firmware under `-icount` and returns its rows.
+pub fn measure() -> Result<Vec<Row>, IcountError> {
+    parse(&run_bench()?)
+}
+
+/// The deepest stack the bench reported (`stack <bytes>` line), if any.
+#[must_use]
+pub fn stack_bytes(console: &str) -> Option<u32> {
+    console
+        .lines()
+        .find_map(|l| l.strip_prefix("stack ")?.trim().parse().ok())
+}
+
+/// Flash and RAM use of a firmware ELF.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Footprint {
+    /// Code and read-only data in flash (`.vector_table`, `.text`, `.rodata`), bytes.
+    pub text: u64,
+    /// Initialised statics (`.data`: in flash and in RAM), bytes.
+    pub data: u64,
+    /// Zeroed statics (`.bss`, `.uninit`), bytes.
+    pub bss: u64,
+}
+
+/// Reads the section sizes of a firmware ELF.
+pub fn footprint(elf: &std::path::Path) -> Result<Footprint, IcountError> {
+    use object::{Object, ObjectSection};
+    let bytes = std::fs::read(elf).map_err(QemuError::Io)?;
+    let file = object::File::parse(&*bytes)
+        .map_err(|e| IcountError::Region(format!("{}: {e}", elf.display())))?;
+    let mut f = Footprint::default();
+    for section in file.sections() {
+        match section.name().unwrap_or("") {
+            ".vector_table" | ".text" | ".rodata" => f.text += section.size(),
+            ".data" => f.data += section.size(),
+            ".bss" | ".uninit" => f.bss += section.size(),
+            _ => {}
+        }
+    }
+    Ok(f)
 }
 
 /// Formats rows as a Markdown table.

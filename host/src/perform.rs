@@ -14,10 +14,13 @@
 //! frames are flowing: the servo targets of every tracker frame must be
 //! bit-identical between the two.
 
+use crate::blob::{self, AxisSpec, BlobError, TableSpec};
 use crate::import::csv::TrackerSample;
 use crate::qemu::{self, Config, QemuError};
+use crate::rigfile::RigFile;
 use marionette_core::frame::{Cause, NoCycles, Performer, Region, Update};
 use marionette_core::servo::maestro;
+use marionette_core::table::{Interp, Kind, Wrap};
 use marionette_core::wire::{
     self, Command, CommandKind, Hello, List, MAX_FRAME, MAX_SENSORS, Message, PROTOCOL_VERSION,
     Sensor, TrackerFrame, WireError,
@@ -41,6 +44,9 @@ pub enum PerformError {
         /// Sensors found.
         count: usize,
     },
+    /// A table could not be built.
+    #[error("building a table: {0}")]
+    Table(String),
     /// A message could not be encoded.
     #[error("encoding a wire message: {0:?}")]
     Wire(WireError),
@@ -67,6 +73,50 @@ pub fn region(rig_blob: &[u8], table_blob: Option<&[u8]>) -> Vec<u8> {
         out.extend_from_slice(t);
     }
     out
+}
+
+/// A static grid over `axes` (each `(name, min, step, count)`, linear and
+/// bounded) whose every sample is the rig's rest pose: a table that arms the
+/// board and leaves all the visible work to the solver. Used by the
+/// instruction-count bench and the end-to-end tests.
+pub fn rest_grid(rig: &RigFile, axes: &[(&str, f32, f32, u16)]) -> Result<Vec<u8>, PerformError> {
+    let rig_blob = crate::rigfile::to_blob(rig).map_err(|e| PerformError::Table(e.to_string()))?;
+    let region = Region::parse(&rig_blob);
+    let core_rig = region.rig.ok_or(PerformError::NoRig)?;
+    let rest = core_rig.rest_pose();
+    let pose: Vec<_> = rest
+        .positions
+        .iter()
+        .zip(&rest.rotations)
+        .take(rig.segment_names().len())
+        .map(|(p, q)| (*p, *q))
+        .collect();
+    let axes: Vec<AxisSpec> = axes
+        .iter()
+        .map(|&(name, min, step, count)| AxisSpec {
+            name: name.into(),
+            min,
+            step,
+            count,
+            wrap: Wrap::Bounded,
+            interp: Interp::Linear,
+        })
+        .collect();
+    let samples: usize = axes.iter().map(|a| usize::from(a.count)).product();
+    let cells: usize = axes
+        .iter()
+        .map(|a| usize::from(a.count).saturating_sub(1))
+        .product();
+    let spec = TableSpec {
+        rig_hash: rig.rig_hash(),
+        kind: Kind::Grid,
+        axes,
+        segment_names: rig.segment_names().to_vec(),
+        samples: vec![pose; samples],
+        valid: vec![true; cells],
+        durations: vec![],
+    };
+    blob::write(&spec).map_err(|e: BlobError| PerformError::Table(e.to_string()))
 }
 
 /// Groups tracker samples into frames, one per distinct timestamp, in time

@@ -326,6 +326,13 @@ impl<'r, 'a> Performer<'r, 'a> {
         &self.pose
     }
 
+    /// The per-stage counts of the last tracker frame (see [`stage`]), in the
+    /// units of the [`Cycles`] passed to [`Performer::receive`].
+    #[must_use]
+    pub fn stages(&self) -> [u32; STAGES] {
+        self.stages
+    }
+
     /// The board's status message.
     #[must_use]
     pub fn status(&self) -> Status {

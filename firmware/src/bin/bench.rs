@@ -19,14 +19,19 @@ use cortex_m_rt::entry;
 use glam::Quat;
 use glam::Vec3;
 use marionette_core::body::{Angles, cmu};
+use marionette_core::frame::{Cycles, Performer, Region, stage};
 use marionette_core::goal::{Goal, GoalSet, Target};
 use marionette_core::grid::{Axis, Grid, Query, SliceSamples};
 use marionette_core::math;
 use marionette_core::pose::{LocalPose, Pose};
 use marionette_core::solve::{self, Method, Solver};
+use marionette_core::wire::{
+    self, Command, CommandKind, List, MAX_FRAME, Message, Sensor, TrackerFrame,
+};
 use marionette_firmware::board::qemu::exit;
 use marionette_firmware::console::Line;
 use marionette_firmware::icount::Counter;
+use marionette_firmware::{region, stack};
 
 /// Number of quaternion pairs each slerp row is measured over.
 const PAIRS: usize = 64;
@@ -229,8 +234,100 @@ fn solve_rows(counter: &mut Counter) {
     }
 }
 
+/// Tracker frames in the per-frame rows (the first, cold one is not counted).
+const FRAMES: u32 = 40;
+
+/// SysTick as an up-counter for the core's stage counts (the same 25 MHz
+/// ticks as [`Counter`]).
+struct SysTickCycles;
+
+impl Cycles for SysTickCycles {
+    fn now(&mut self) -> u32 {
+        0x00FF_FFFF - cortex_m::peripheral::SYST::get_current()
+    }
+}
+
+/// Feeds one encoded message to the performer.
+fn feed(performer: &mut Performer<'_, '_>, msg: &Message, now_us: u32) {
+    let mut buf = [0u8; MAX_FRAME];
+    if let Ok(frame) = wire::encode(msg, &mut buf) {
+        let mut input: &[u8] = frame;
+        while !input.is_empty() {
+            let _ = performer.receive(&mut input, now_us, &mut SysTickCycles);
+        }
+    }
+}
+
+/// A tracker frame: the right hand circling, left hand and pelvis still.
+fn tracker_frame(i: u32) -> Message {
+    let a = i as f32 * 0.05;
+    let sensor = |id, position| Sensor {
+        id,
+        position,
+        rotation: [1.0, 0.0, 0.0, 0.0],
+    };
+    let mut sensors = List::new();
+    let _ = sensors.push(sensor(
+        0,
+        [-0.3 + 0.1 * math::cos(a), 0.25 + 0.1 * math::sin(a), 0.3],
+    ));
+    let _ = sensors.push(sensor(1, [0.3, -0.2, 0.1]));
+    let _ = sensors.push(sensor(2, [0.0, 0.0, 0.0]));
+    Message::TrackerFrame(TrackerFrame {
+        seq: i + 1,
+        time_us: i * 1000,
+        sensors,
+    })
+}
+
+/// The whole live loop per tracker frame on the table region's rig
+/// (`humanoid16`, 3 parameters, 4 goals), by stage.
+fn frame_rows(counter: &mut Counter) {
+    let region = Region::parse(region::tables());
+    let Some(mut performer) = Performer::new(&region) else {
+        Line::new().str("frame: no rig in the table region").print();
+        return;
+    };
+    feed(
+        &mut performer,
+        &Message::Command(Command {
+            seq: 0,
+            kind: CommandKind::Arm,
+        }),
+        0,
+    );
+    feed(&mut performer, &tracker_frame(0), 0);
+    let mut sums = [0u32; 6];
+    let mut outer = 0u32;
+    for i in 1..FRAMES {
+        let msg = tracker_frame(i);
+        outer = outer.saturating_add(counter.ticks(|| feed(&mut performer, &msg, i * 1000)));
+        for (sum, s) in sums.iter_mut().zip(performer.stages()) {
+            *sum = sum.saturating_add(s);
+        }
+    }
+    let n = (FRAMES - 1) as usize;
+    let names = [
+        (stage::DECODE, "frame.humanoid16.decode"),
+        (stage::MAP, "frame.humanoid16.map"),
+        (stage::SYNTH, "frame.humanoid16.synth"),
+        (stage::SOLVE, "frame.humanoid16.solve"),
+        (stage::SERVO, "frame.humanoid16.servo"),
+        (stage::TOTAL, "frame.humanoid16.total"),
+    ];
+    for (index, name) in names {
+        report(name, "-", n, sums.get(index).copied().unwrap_or(0));
+    }
+    report("frame.humanoid16.receive", "-", n, outer);
+    Line::new()
+        .str("frame armed ")
+        .u32(u32::from(performer.armed()))
+        .print();
+}
+
 #[entry]
 fn main() -> ! {
+    stack::paint();
     let Some(peripherals) = cortex_m::Peripherals::take() else {
         exit(3)
     };
@@ -239,6 +336,11 @@ fn main() -> ! {
     slerp_rows(&mut counter);
     synth_rows(&mut counter);
     solve_rows(&mut counter);
+    frame_rows(&mut counter);
+    Line::new()
+        .str("stack ")
+        .u32(stack::high_water() as u32)
+        .print();
     Line::new().str("end").print();
     exit(0)
 }

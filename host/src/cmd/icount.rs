@@ -13,15 +13,27 @@ pub struct Args {
 
 /// Builds and runs the bench firmware under `-icount` and prints its rows.
 pub fn run(args: &Args) -> Result<(), CmdError> {
-    let rows = icount::measure()?;
+    let console = icount::run_bench()?;
+    let rows = icount::parse(&console)?;
+    let perform = icount::footprint(&crate::qemu::build_firmware("perform")?)?;
+    let stack = icount::stack_bytes(&console);
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&rows)?);
+        let doc = serde_json::json!({ "rows": rows, "perform_footprint": perform, "bench_stack_bytes": stack });
+        println!("{}", serde_json::to_string_pretty(&doc)?);
     } else {
         println!(
             "Instruction counts on QEMU mps2-an386 (Cortex-M4F), -icount shift=7; \
              instructions, not cycles.\n"
         );
         print!("{}", icount::table(&rows));
+        println!(
+            "\nperform firmware: {} B flash (text + rodata + vectors), {} B data, {} B bss; \
+             deepest stack in the bench: {} B",
+            perform.text,
+            perform.data,
+            perform.bss,
+            stack.map_or("?".into(), |s| s.to_string())
+        );
     }
     Ok(())
 }
