@@ -20,6 +20,8 @@ enum Command {
     Icount(cmd::icount::Args),
     /// Run the live loop natively on a tracker recording and write the servo curves.
     Sim(cmd::sim::Args),
+    /// Stream a tracker recording to a real board over a serial port.
+    Stream(cmd::stream::Args),
     /// Draw a pose and its goals in four views (front, side, top, perspective).
     Render(cmd::render::Args),
     /// Draw curves over time from a CSV file (time column first).
@@ -42,6 +44,7 @@ fn main() -> ExitCode {
         Command::Emulate(args) => cmd::emulate::run(&args),
         Command::Icount(args) => cmd::icount::run(&args),
         Command::Sim(args) => cmd::sim::run(&args),
+        Command::Stream(args) => cmd::stream::run(&args),
         Command::Render(args) => cmd::render::run(&args),
         Command::Plot(args) => cmd::plot::run(&args),
         Command::Flash(args) => cmd::flash::run(&args),

@@ -211,6 +211,35 @@ pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
     Ok(out)
 }
 
+/// How a session is sent.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Pacing {
+    /// Every message as soon as the link takes it.
+    AsFastAsPossible,
+    /// Each message at its recorded time after the first.
+    RealTime,
+}
+
+/// Sends a session through `send`, paced as asked.
+pub fn pace<E>(
+    session: &[Sent],
+    pacing: Pacing,
+    mut send: impl FnMut(&[u8]) -> Result<(), E>,
+) -> Result<(), E> {
+    let start = std::time::Instant::now();
+    let first = session.first().map_or(0, |s| s.time_us);
+    for sent in session {
+        if pacing == Pacing::RealTime {
+            let due = Duration::from_micros(u64::from(sent.time_us.wrapping_sub(first)));
+            if let Some(wait) = due.checked_sub(start.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+        send(&sent.bytes)?;
+    }
+    Ok(())
+}
+
 /// Everything a performance produced.
 #[derive(Clone, Debug, Default)]
 pub struct Run {
@@ -225,6 +254,16 @@ pub struct Run {
 
 /// Runs a session natively through the core.
 pub fn simulate(region_bytes: &[u8], session: &[Sent]) -> Result<Run, PerformError> {
+    simulate_with(region_bytes, session, &mut |_, _| {})
+}
+
+/// [`simulate`], calling `observe` after every step that produced outputs
+/// or a reply, with the performer (e.g. to sample its pose) and the update.
+pub fn simulate_with(
+    region_bytes: &[u8],
+    session: &[Sent],
+    observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
+) -> Result<Run, PerformError> {
     let region = Region::parse(region_bytes);
     let mut performer = Performer::new(&region).ok_or(PerformError::NoRig)?;
     let period = performer.frame_period_us().max(1);
@@ -237,12 +276,12 @@ pub fn simulate(region_bytes: &[u8], session: &[Sent]) -> Result<Run, PerformErr
         {
             clock = clock.wrapping_add(period);
             let update = performer.tick(clock);
-            record(&mut run, &performer, update);
+            record(&mut run, &performer, update, observe);
         }
         let mut input = sent.bytes.as_slice();
         while !input.is_empty() {
             let update = performer.receive(&mut input, sent.time_us, &mut NoCycles);
-            record(&mut run, &performer, update);
+            record(&mut run, &performer, update, observe);
         }
     }
     // After the session: tick until every servo is at rest (bounded).
@@ -252,12 +291,20 @@ pub fn simulate(region_bytes: &[u8], session: &[Sent]) -> Result<Run, PerformErr
         }
         clock = clock.wrapping_add(period);
         let update = performer.tick(clock);
-        record(&mut run, &performer, update);
+        record(&mut run, &performer, update, observe);
     }
     Ok(run)
 }
 
-fn record(run: &mut Run, performer: &Performer<'_, '_>, update: Update) {
+fn record(
+    run: &mut Run,
+    performer: &Performer<'_, '_>,
+    update: Update,
+    observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
+) {
+    if update.outputs.is_some() || update.reply.is_some() {
+        observe(performer, &update);
+    }
     match update.outputs {
         Some(Cause::Frame(_)) => run.frame_targets.push(performer.targets().to_vec()),
         Some(Cause::Rest) => run.rest_targets.push(performer.targets().to_vec()),
@@ -271,14 +318,16 @@ fn record(run: &mut Run, performer: &Performer<'_, '_>, update: Update) {
 /// Runs a session on the emulated board with `region_file` in its table
 /// region, streaming as fast as the link takes it. `channels` is the number
 /// of servo channels per output frame (the rig's highest channel + 1) and
-/// `frames` the number of frame-driven outputs expected. The last message
-/// (the `Disarm`) is sent after the board has answered every frame and a
-/// further `pause` (a pause longer than the fail-safe time-out exercises it).
+/// `frames` the number of frame-driven outputs expected. Messages are sent as
+/// `pacing` says; the last one (the `Disarm`) is sent after the board has
+/// answered every frame and a further `pause` (a pause longer than the
+/// fail-safe time-out exercises it).
 pub fn emulate(
     region_file: &Path,
     session: &[Sent],
     channels: usize,
     frames: usize,
+    pacing: Pacing,
     pause: Duration,
 ) -> Result<(Run, Vec<u8>), PerformError> {
     let elf = qemu::build_firmware("perform")?;
@@ -289,9 +338,7 @@ pub fn emulate(
     };
     let mut emulator = qemu::Emulator::start(&config)?;
     let (body, last) = session.split_at(session.len().saturating_sub(1));
-    for sent in body {
-        emulator.send(&sent.bytes)?;
-    }
+    pace(body, pacing, |bytes| emulator.send(bytes))?;
     // Let the board finish the frames before it is told to stop.
     emulator.wait_servo_bytes(frames * channels * 4)?;
     std::thread::sleep(pause);

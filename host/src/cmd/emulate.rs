@@ -8,7 +8,7 @@
 
 use super::CmdError;
 use super::sim::{self, Inputs};
-use crate::perform;
+use crate::perform::{self, Pacing};
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -28,6 +28,9 @@ pub struct Args {
     /// Where to write `servo_emulated.csv` and `region.bin`.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
+    /// Send each frame at its recorded time instead of as fast as possible.
+    #[arg(long)]
+    pub realtime: bool,
     /// Also save the raw servo-bus bytes here.
     #[arg(long)]
     pub raw_servo: Option<PathBuf>,
@@ -61,6 +64,7 @@ pub struct Summary {
 pub fn compare(
     inputs: &Inputs,
     out: &std::path::Path,
+    pacing: Pacing,
 ) -> Result<(perform::Run, Summary, Vec<u8>), CmdError> {
     let start = Instant::now();
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
@@ -75,6 +79,7 @@ pub fn compare(
         &inputs.session,
         channels,
         expected,
+        pacing,
         std::time::Duration::ZERO,
     )?;
     let differing = native
@@ -101,7 +106,12 @@ pub fn compare(
 /// Runs the performance and prints its summary.
 pub fn run(args: &Args) -> Result<(), CmdError> {
     let inputs = sim::load(&args.rig, args.tables.as_deref(), &args.recording)?;
-    let (_, summary, raw) = compare(&inputs, &args.out)?;
+    let pacing = if args.realtime {
+        Pacing::RealTime
+    } else {
+        Pacing::AsFastAsPossible
+    };
+    let (_, summary, raw) = compare(&inputs, &args.out, pacing)?;
     if let Some(path) = &args.raw_servo {
         std::fs::write(path, raw).map_err(|e| format!("{}: {e}", path.display()))?;
     }

@@ -10,6 +10,7 @@ pub mod plot;
 pub mod render;
 pub mod sim;
 pub mod solve;
+pub mod stream;
 pub mod synth;
 
 /// An error from any subcommand, printed by `main` as `marionette: <error>`.
