@@ -431,6 +431,103 @@ fn humanoid16_is_a_16_servo_puppet() {
     assert!((l_knee.rest_us - want).abs() < 1e-3, "{}", l_knee.rest_us);
 }
 
+/// Bone name -> `direction` of an ASF file (read here from its text).
+fn asf_directions(path: &Path) -> Vec<(String, [f64; 3])> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut out = Vec::new();
+    let mut name = None;
+    for line in text.lines() {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["name", n] => name = Some((*n).to_owned()),
+            ["direction", x, y, z] => {
+                let d = [x, y, z].map(|v| v.parse::<f64>().unwrap());
+                out.push((name.take().unwrap(), d));
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+#[test]
+fn humanoid16_has_an_hdm05_retarget_map() {
+    let file = load("humanoid16.toml");
+    let map = file.retarget_map(Some("hdm05")).expect("an hdm05 map");
+    assert!(file.retarget_map(Some("nope")).is_none());
+    assert_eq!(file.retarget_map(None).unwrap(), file.retarget.as_slice());
+    // Every segment driven exactly once, by the root or an ASF bone.
+    let n = file.segment_names().len();
+    let mut segs: Vec<u8> = map.iter().map(|r| r.segment).collect();
+    segs.sort_unstable();
+    assert_eq!(segs, (0..n as u8).collect::<Vec<_>>());
+    let asf = asf_directions(&repo().join("data/hdm05_bk/HDM_bk.asf"));
+    assert_eq!(asf.len(), 30, "30 bones");
+    let direction = |bone: &str| asf.iter().find(|(b, _)| b == bone).map(|(_, d)| *d);
+    for r in map {
+        assert!(
+            r.mocap == "root" || direction(&r.mocap).is_some(),
+            "{} is not an HDM05 bone",
+            r.mocap
+        );
+    }
+    // The offsets turn each rest limb of the puppet (along its child's
+    // origin, or a leaf's touch point) onto the ASF bone's rest direction:
+    // W_rig = W_mocap · offset, and every ASF rest rotation is the identity.
+    let desc = file.desc();
+    let entry = |seg: &str| {
+        let i = file.segment_names().iter().position(|s| s == seg).unwrap();
+        map.iter().find(|r| usize::from(r.segment) == i).unwrap()
+    };
+    let limbs = [
+        ("l_upper_arm", "l_forearm"),
+        ("r_upper_arm", "r_forearm"),
+        ("l_forearm", ""),
+        ("r_forearm", ""),
+        ("l_thigh", "l_shin"),
+        ("r_thigh", "r_shin"),
+        ("l_shin", "l_foot"),
+        ("r_shin", "r_foot"),
+    ];
+    let seg = |name: &str| {
+        let i = file.segment_names().iter().position(|s| s == name).unwrap();
+        desc.segments.as_slice()[i]
+    };
+    for (limb, child) in limbs {
+        let bone = if child.is_empty() {
+            seg(limb).touch
+        } else {
+            seg(child).origin
+        }
+        .map(f64::from);
+        let r = entry(limb);
+        let turned = rotate(r.rotation_offset, bone);
+        let want = direction(&r.mocap).unwrap();
+        let cos = (turned[0] * want[0] + turned[1] * want[1] + turned[2] * want[2])
+            / (turned.iter().map(|c| c * c).sum::<f64>().sqrt()
+                * want.iter().map(|c| c * c).sum::<f64>().sqrt());
+        assert!(cos > 0.9999, "{limb} ({}): cos {cos}", r.mocap);
+    }
+    // The feet take their leg's splay, so a straight leg has a level foot.
+    assert_eq!(
+        entry("l_foot").rotation_offset,
+        entry("l_shin").rotation_offset
+    );
+    assert_eq!(
+        entry("r_foot").rotation_offset,
+        entry("r_shin").rotation_offset
+    );
+    // Map names are unique.
+    let text = std::fs::read_to_string(repo().join("rigs/humanoid16.toml")).unwrap();
+    let twice = format!("{text}\n[[retarget.map]]\nname = \"hdm05\"\n");
+    let e = rigfile::parse(&twice, "bad.toml").unwrap_err().to_string();
+    let line = twice.lines().count();
+    assert!(
+        e.starts_with(&format!("bad.toml:{line}: retarget.map[1].name")) && e.contains("twice"),
+        "{e}"
+    );
+}
+
 // ---------------------------------------------------------------------------
 // The sensor map.
 

@@ -80,7 +80,16 @@
 //! mocap = "RightForeArm"
 //! segment = "r_forearm"
 //! rotation_offset = [1, 0, 0, 0] # optional
+//!
+//! [[retarget.map]]               # further maps for other mocap skeletons, chosen by
+//! name = "hdm05"                 # name in a build spec (`[rig] retarget = "hdm05"`)
+//! joint = [{ mocap = "rradius", segment = "r_forearm" }]   # entries as above
 //! ```
+//!
+//! `[[retarget.joint]]` is the default map (used when a build spec names
+//! none); each `[[retarget.map]]` is a complete alternative map for another
+//! mocap skeleton (different joint names or rest pose), with its own
+//! entries (`joint = [...]`, or `[[retarget.map.joint]]` tables after it).
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -133,6 +142,16 @@ pub struct RetargetJoint {
     pub rotation_offset: [f64; 4],
 }
 
+/// A named alternative retarget map (`[[retarget.map]]`), for another mocap
+/// skeleton.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RetargetMap {
+    /// The name a build spec selects it by (`[rig] retarget = "..."`).
+    pub name: String,
+    /// Its entries, in segment order of first mention.
+    pub joints: Vec<RetargetJoint>,
+}
+
 /// A loaded rig file.
 #[derive(Clone, Debug)]
 pub struct RigFile {
@@ -141,8 +160,11 @@ pub struct RigFile {
     name: String,
     segment_names: Vec<String>,
     desc: RigDesc<'static>,
-    /// The retarget map, in segment order of first mention.
+    /// The default retarget map (`[[retarget.joint]]`), in segment order of
+    /// first mention.
     pub retarget: Vec<RetargetJoint>,
+    /// The named alternative maps (`[[retarget.map]]`), in file order.
+    pub retarget_maps: Vec<RetargetMap>,
 }
 
 impl RigFile {
@@ -168,6 +190,20 @@ impl RigFile {
     #[must_use]
     pub fn rig_hash(&self) -> u64 {
         self.desc().rig_hash()
+    }
+
+    /// A retarget map: the default one for `None`, else the named
+    /// `[[retarget.map]]` (`None` if there is no such map).
+    #[must_use]
+    pub fn retarget_map(&self, name: Option<&str>) -> Option<&[RetargetJoint]> {
+        match name {
+            None => Some(&self.retarget),
+            Some(n) => self
+                .retarget_maps
+                .iter()
+                .find(|m| m.name == n)
+                .map(|m| m.joints.as_slice()),
+        }
     }
 }
 
@@ -347,6 +383,16 @@ struct RawPlane {
 struct RawRetarget {
     #[serde(default)]
     identity: bool,
+    #[serde(default)]
+    joint: Vec<S<RawRetargetJoint>>,
+    #[serde(default)]
+    map: Vec<S<RawRetargetMap>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRetargetMap {
+    name: S<String>,
     #[serde(default)]
     joint: Vec<S<RawRetargetJoint>>,
 }
@@ -725,12 +771,14 @@ impl Builder<'_, '_> {
         desc.params = self.params(&raw.param)?;
         desc.goals = self.goals(&raw.goal)?;
         let retarget = self.retarget(raw.retarget.as_ref())?;
+        let retarget_maps = self.retarget_maps(raw.retarget.as_ref())?;
         let rig = RigFile {
             file: self.src.file.to_string(),
             name: raw.name.get_ref().clone(),
             segment_names: self.names.clone(),
             desc,
             retarget,
+            retarget_maps,
         };
         self.check(&rig.desc())?;
         Ok(rig)
@@ -1202,9 +1250,52 @@ impl Builder<'_, '_> {
                 });
             }
         }
-        for (i, j) in r.joint.iter().enumerate() {
+        self.retarget_joints(&r.joint, "retarget.joint", out)
+    }
+
+    /// The named maps (`[[retarget.map]]`): unique, non-empty names.
+    fn retarget_maps(
+        &self,
+        raw: Option<&S<RawRetarget>>,
+    ) -> Result<Vec<RetargetMap>, RigFileError> {
+        let Some(raw) = raw else {
+            return Ok(Vec::new());
+        };
+        let mut maps: Vec<RetargetMap> = Vec::new();
+        for (i, m) in raw.get_ref().map.iter().enumerate() {
+            let v = m.get_ref();
+            let path = format!("retarget.map[{i}]");
+            let name = v.name.get_ref().trim();
+            if name.is_empty() {
+                return Err(self.err(&v.name, &format!("{path}.name"), "must not be empty"));
+            }
+            if maps.iter().any(|m| m.name == name) {
+                return Err(self.err(
+                    &v.name,
+                    &format!("{path}.name"),
+                    format!("{name:?} is used twice"),
+                ));
+            }
+            let joints = self.retarget_joints(&v.joint, &format!("{path}.joint"), Vec::new())?;
+            maps.push(RetargetMap {
+                name: name.to_owned(),
+                joints,
+            });
+        }
+        Ok(maps)
+    }
+
+    /// Entries of one map (`path` names them in errors), added to `out`; a
+    /// later entry for the same segment replaces an earlier one.
+    fn retarget_joints(
+        &self,
+        raw: &[S<RawRetargetJoint>],
+        path: &str,
+        mut out: Vec<RetargetJoint>,
+    ) -> Result<Vec<RetargetJoint>, RigFileError> {
+        for (i, j) in raw.iter().enumerate() {
             let v = j.get_ref();
-            let path = format!("retarget.joint[{i}]");
+            let path = format!("{path}[{i}]");
             let segment = self.segment(&v.segment, &format!("{path}.segment"))?;
             let rotation_offset = match &v.rotation_offset {
                 None => [1.0, 0.0, 0.0, 0.0],

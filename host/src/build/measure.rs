@@ -275,7 +275,7 @@ pub fn holdout(
                 .collect(),
             scalars: synth.durations.iter().map(|&d| f64::from(d)).collect(),
         };
-        let e = compare(&pred, &r.value, data.probe);
+        let e = compare(&pred, &r.value, data.probe.map(|i| (i, data.probe_point)));
         joints.push(e.mean_position);
         rotations.push(e.mean_rotation);
         probes.extend(e.probe);
@@ -289,9 +289,12 @@ pub fn holdout(
             durations.push(rel / r.value.scalars.len() as f64);
         }
         if let (Some(body), Some((_, seg))) = (&body, solver) {
-            match body.solve(&frames[0], seg, r.value.poses[seg].0.as_vec3()) {
+            let (p, q) = r.value.poses[seg];
+            let point = data.probe_point;
+            let target = (p + q * point).as_vec3();
+            match body.solve(&frames[0], seg, point.as_vec3(), target) {
                 Some(solved) => {
-                    let e = compare(&solved, &r.value, Some(seg));
+                    let e = compare(&solved, &r.value, Some((seg, point)));
                     solved_joint.push(e.mean_position);
                     solved_probe.extend(e.probe);
                 }
@@ -339,12 +342,19 @@ impl RigBody {
         })
     }
 
-    /// Solves `segment`'s origin to `target` from the synthesized `pose`.
-    fn solve(&self, pose: &[(Vec3, Quat)], segment: usize, target: Vec3) -> Option<Value> {
+    /// Solves `point` of `segment` (in its frame) to `target` from the
+    /// synthesized `pose`.
+    fn solve(
+        &self,
+        pose: &[(Vec3, Quat)],
+        segment: usize,
+        point: Vec3,
+        target: Vec3,
+    ) -> Option<Value> {
         if let Some(file) = &self.file {
             let desc = file.desc();
             let rig = marionette_core::rig::Rig::from_desc(&desc).ok()?;
-            return solve_body(&rig.body(), pose, segment, target);
+            return solve_body(&rig.body(), pose, segment, point, target);
         }
         let ball = Joint::three(
             Dof::new(Axis::Z, -PI, PI),
@@ -370,16 +380,17 @@ impl RigBody {
             parents: &self.parents,
             offsets: &self.offsets,
         };
-        solve_body(&body, pose, segment, target)
+        solve_body(&body, pose, segment, point, target)
     }
 }
 
-/// The core's default solve of one point goal (the segment's origin at
+/// The core's default solve of one point goal (`point` of the segment at
 /// `target`), warm-started from `pose` projected onto the body's joints.
 fn solve_body(
     body: &Body<'_>,
     pose: &[(Vec3, Quat)],
     segment: usize,
+    point: Vec3,
     target: Vec3,
 ) -> Option<Value> {
     let mut p = Pose::<64>::new(pose.len()).ok()?;
@@ -390,7 +401,7 @@ fn solve_body(
     pose::to_local(&body.hierarchy(), &p, &mut local).ok()?;
     let mut angles = Angles::<64>::from_local(body, &local).ok()?;
     let mut goals = GoalSet::<1>::new();
-    let goal = Goal::reach(u8::try_from(segment).ok()?, target, 1.0).at(Vec3::ZERO);
+    let goal = Goal::reach(u8::try_from(segment).ok()?, target, 1.0).at(point);
     goals.push(goal).ok()?;
     solve::solve(&Solver::DEFAULT, body, &goals, &mut angles, &mut p).ok()?;
     Some(Value {

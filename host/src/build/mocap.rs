@@ -12,6 +12,12 @@
 //!   (x, y, z)" means "x to the figure's left, y above the floor, z in front".
 //!   `frame = "root"` is the same with the origin at the root joint itself
 //!   (y above the root), for parameter maps in the root's frame.
+//!   `frame = "stand"` measures the parameters in the root's own frame
+//!   (origin at the root joint, axes turning with the root in yaw, pitch and
+//!   roll), then places the pose at the rig's rest root placement
+//!   ([`Rig::rest_root`]), for a figure whose root is held by a stand.
+//!   A parameter's segment position may be that of a point fixed in the
+//!   segment (`point`, e.g. a palm centre in the forearm's frame).
 //! - **Motion tables**: each clip is cut at `cut = [first, ..., last]` into
 //!   phases, expressed in the heading frame of its first frame, and each
 //!   phase is time-resampled with [`marionette_core::clip::resample`] to the
@@ -185,6 +191,26 @@ impl Frame {
         }
     }
 
+    /// The root's own frame: origin at the root joint, axes turning with the
+    /// root (`x ↦ conj(q_root) · (x − p_root)`).
+    #[must_use]
+    pub fn root(root: &Seg) -> Frame {
+        Frame {
+            origin: root.0,
+            rot: root.1.conjugate(),
+        }
+    }
+
+    /// The change that places a pose given in a root's own frame at a root
+    /// placement: `x ↦ rotation · x + position`.
+    #[must_use]
+    pub fn placing(position: DVec3, rotation: DQuat) -> Frame {
+        Frame {
+            origin: -(rotation.conjugate() * position),
+            rot: rotation,
+        }
+    }
+
     /// The same frame with its origin raised to the root joint.
     #[must_use]
     pub fn at_root(self, root: &Seg) -> Frame {
@@ -225,9 +251,14 @@ pub fn measure_segments(spec: &Spec, rig: &Rig) -> Result<Vec<Option<usize>>, In
 /// A parameter measured on a normalized pose.
 fn position_param(axis: &AxisSpec, seg: Option<usize>, pose: &[Seg]) -> Option<f64> {
     match (&axis.measure, seg) {
-        (Measure::Position { component, .. }, Some(s)) => {
-            pose.get(s).map(|p| p.0.to_array()[*component])
-        }
+        (
+            Measure::Position {
+                component, point, ..
+            },
+            Some(s),
+        ) => pose
+            .get(s)
+            .map(|p| (p.0 + p.1 * DVec3::from_array(*point)).to_array()[*component]),
         _ => None,
     }
 }
@@ -236,6 +267,8 @@ fn position_param(axis: &AxisSpec, seg: Option<usize>, pose: &[Seg]) -> Option<f
 pub fn grid_records(spec: &Spec, m: &MocapSpec, mocap: &Mocap) -> Result<Vec<Record>, BuildError> {
     let segs = measure_segments(spec, &mocap.rig)?;
     let forward = DVec3::from_array(m.forward);
+    let (rest_position, rest_rotation) = mocap.rig.rest_root();
+    let stand = Frame::placing(rest_position, rest_rotation);
     let mut out = Vec::new();
     for (g, (c, clip)) in m.clips.iter().zip(&mocap.clips).enumerate() {
         let n = clip.poses.len();
@@ -260,10 +293,14 @@ pub fn grid_records(spec: &Spec, m: &MocapSpec, mocap: &Mocap) -> Result<Vec<Rec
                 let frame = match spec.frame {
                     FrameKind::Heading => Frame::heading(&world[0], forward, None),
                     FrameKind::Root => Frame::heading(&world[0], forward, None).at_root(&world[0]),
+                    FrameKind::Stand => Frame::root(&world[0]),
                     FrameKind::World => Frame::WORLD,
                 };
-                let pose = frame.apply(world);
+                let mut pose = frame.apply(world);
                 let params = grid_params(spec, c, &segs, &pose);
+                if spec.frame == FrameKind::Stand {
+                    pose = stand.apply(&pose);
+                }
                 out.push(Record {
                     params,
                     value: Value {
@@ -391,7 +428,10 @@ fn normalized_clip(
     let direction = (motion.looping && travel > 0.05).then_some(d);
     let frame = match spec.frame {
         FrameKind::Heading => Frame::heading(&start, forward, direction),
-        FrameKind::Root => Frame::heading(&start, forward, direction).at_root(&start),
+        // `stand` is refused for motion tables by the spec parser; as `root`.
+        FrameKind::Root | FrameKind::Stand => {
+            Frame::heading(&start, forward, direction).at_root(&start)
+        }
         FrameKind::World => Frame::WORLD,
     };
     let span = (last - first) as f64;
@@ -492,5 +532,32 @@ mod tests {
         // An explicit travel direction (+X) gives the same frame.
         let d = Frame::heading(&root, DVec3::Z, Some(DVec3::X)).apply(&[hand]);
         assert!((d[0].0 - h[1].0).length() < 1e-12);
+    }
+
+    #[test]
+    fn stand_frame_follows_the_root_in_pitch_then_places_it() {
+        // The root at (1, 0.9, 2) pitched forward 90° (about +X: its +Y turns
+        // to +Z); a hand 0.5 m along the root's own +Y axis is at
+        // (1, 0.9, 2.5) in the world, and (0, 0.5, 0) in the root's frame,
+        // whatever the heading frame says.
+        let root = (
+            DVec3::new(1.0, 0.9, 2.0),
+            DQuat::from_rotation_x(std::f64::consts::FRAC_PI_2),
+        );
+        let hand = (DVec3::new(1.0, 0.9, 2.5), root.1);
+        let own = Frame::root(&root).apply(&[root, hand]);
+        assert!(own[0].0.length() < 1e-12 && own[0].1.angle_between(DQuat::IDENTITY) < 1e-9);
+        assert!(
+            (own[1].0 - DVec3::new(0.0, 0.5, 0.0)).length() < 1e-12,
+            "{own:?}"
+        );
+        // Placed on a stand at (0, 0.44, 0) turned 90° about Y: x ↦ R·x + p.
+        let r = DQuat::from_rotation_y(std::f64::consts::FRAC_PI_2);
+        let placed = Frame::placing(DVec3::new(0.0, 0.44, 0.0), r).apply(&own);
+        assert!((placed[0].0 - DVec3::new(0.0, 0.44, 0.0)).length() < 1e-12);
+        assert!(placed[0].1.angle_between(r) < 1e-9);
+        assert!((placed[1].0 - DVec3::new(0.0, 0.94, 0.0)).length() < 1e-12);
+        let side = Frame::placing(DVec3::ZERO, r).apply(&[(DVec3::Z, DQuat::IDENTITY)]);
+        assert!((side[0].0 - DVec3::X).length() < 1e-12, "{side:?}");
     }
 }

@@ -172,6 +172,9 @@ pub struct Dataset {
     pub probe: Option<usize>,
     /// The segment the parameters are measured on.
     pub probe_segment: Option<usize>,
+    /// The point of the probe segment the parameters are measured at, in
+    /// the segment's frame (an axis' `point`; zero: its origin).
+    pub probe_point: glam::DVec3,
     /// Clip tables: each group's normalized source frames with their phases.
     pub originals: Vec<mocap::Originals>,
     /// Seconds spent importing.
@@ -264,6 +267,7 @@ fn from_examples(set: &examples::ExampleSet) -> Dataset {
         rig_hash: h.0,
         probe: None,
         probe_segment: None,
+        probe_point: glam::DVec3::ZERO,
         originals: Vec::new(),
         load_seconds: 0.0,
     }
@@ -316,8 +320,22 @@ fn from_mocap(
         })
         .collect::<Result<Vec<_>, _>>()?;
     let segs = mocap::measure_segments(spec, &mocap.rig)?;
+    let points: Vec<[f64; 3]> = spec
+        .axes
+        .iter()
+        .filter_map(|a| match &a.measure {
+            spec::Measure::Position { point, .. } => Some(*point),
+            _ => None,
+        })
+        .collect();
+    let probe_point = points.first().copied().unwrap_or_default();
     let probe_segment = match segs.as_slice() {
-        [Some(first), rest @ ..] if rest.iter().all(|s| *s == Some(*first)) => Some(*first),
+        [Some(first), rest @ ..]
+            if rest.iter().all(|s| *s == Some(*first))
+                && points.iter().all(|p| *p == probe_point) =>
+        {
+            Some(*first)
+        }
         _ => None,
     };
     let at_frame = match layout {
@@ -340,6 +358,7 @@ fn from_mocap(
         rig: Some(mocap.rig),
         probe,
         probe_segment,
+        probe_point: glam::DVec3::from_array(probe_point),
         originals,
         load_seconds: 0.0,
     })
@@ -435,7 +454,8 @@ pub fn build(
         candidates
             .iter()
             .map(|&m| {
-                let s = resample::score(&space, &records, &folds, m, data.probe, &post);
+                let probe = data.probe.map(|i| (i, data.probe_point));
+                let s = resample::score(&space, &records, &folds, m, probe, &post);
                 progress.tick();
                 s
             })

@@ -520,16 +520,20 @@ pub struct Errors {
     pub mean_rotation: f64,
 }
 
-/// Compares a prediction with the truth; `probe` is an index into `poses`.
+/// Compares a prediction with the truth; `probe` is an index into `poses`
+/// and a point in that segment's frame.
 #[must_use]
-pub fn compare(pred: &Value, truth: &Value, probe: Option<usize>) -> Errors {
+pub fn compare(pred: &Value, truth: &Value, probe: Option<(usize, DVec3)>) -> Errors {
     let n = truth.poses.len().max(1) as f64;
     let mut e = Errors::default();
     for ((pp, pq), (tp, tq)) in pred.poses.iter().zip(&truth.poses) {
         e.mean_position += (*pp - *tp).length() / n;
         e.mean_rotation += rotation_angle(*pq, *tq) / n;
     }
-    e.probe = probe.and_then(|i| Some((pred.poses.get(i)?.0 - truth.poses.get(i)?.0).length()));
+    let at = |s: &Seg, point: DVec3| s.0 + s.1 * point;
+    e.probe = probe.and_then(|(i, point)| {
+        Some((at(pred.poses.get(i)?, point) - at(truth.poses.get(i)?, point)).length())
+    });
     e
 }
 
@@ -585,7 +589,7 @@ pub fn score(
     records: &[Record],
     folds: &[Vec<usize>],
     method: Method,
-    probe: Option<usize>,
+    probe: Option<(usize, DVec3)>,
     post: &dyn Fn(&mut Value),
 ) -> Score {
     let mut pos = Vec::new();

@@ -17,7 +17,10 @@
 //! - **a rig file** (`[rig] file = "rigs/cmu31.toml"`, see
 //!   [`crate::rigfile`]): its segments, offsets and `[retarget]` map (mocap
 //!   joint → segment, with an optional `rotation_offset` applied after the
-//!   mocap joint's world rotation: `W_rig = W_mocap · offset`). A segment
+//!   mocap joint's world rotation: `W_rig = W_mocap · offset`; the file's
+//!   default `[[retarget.joint]]` map, or the `[[retarget.map]]` the spec
+//!   names with `[rig] retarget = "..."`, e.g. one for HDM05's ASF skeleton
+//!   beside the default one for CMU BVH files). A segment
 //!   with no mocap joint keeps its rest orientation relative to its parent.
 //!   With `[rig] align_rest = true`, every segment whose map entry gives no
 //!   `rotation_offset` gets one computed from the two rest poses: the
@@ -124,7 +127,21 @@ impl Rig {
         let n = desc.segments.len();
         let mut source = vec![None; n];
         let mut rotation_offsets = vec![Quat::IDENTITY; n];
-        for r in &file.retarget {
+        let Some(map) = file.retarget_map(spec.retarget.as_deref()) else {
+            let names: Vec<&str> = file.retarget_maps.iter().map(|m| m.name.as_str()).collect();
+            let problem = format!(
+                "{}: no [[retarget.map]] named {:?} (the file has: {})",
+                file.file,
+                spec.retarget.as_deref().unwrap_or_default(),
+                if names.is_empty() {
+                    "none".to_owned()
+                } else {
+                    names.join(", ")
+                }
+            );
+            return Err(src.error_line(line, "rig.retarget", problem));
+        };
+        for r in map {
             let Some(j) = sk.index_of(&r.mocap) else {
                 let seg = file
                     .segment_names()
@@ -193,6 +210,21 @@ impl Rig {
             hash: file.rig_hash(),
             file: Some(Box::new(file)),
         })
+    }
+
+    /// The rest placement of the root (position, rotation): the rig file's
+    /// `root_position` and `root_rotation`, or the origin without a file.
+    #[must_use]
+    pub fn rest_root(&self) -> (glam::DVec3, glam::DQuat) {
+        let Some(file) = &self.file else {
+            return (glam::DVec3::ZERO, glam::DQuat::IDENTITY);
+        };
+        let desc = file.desc();
+        let [w, x, y, z] = desc.root_rotation.map(f64::from);
+        (
+            Vec3::from_array(desc.root_position).as_dvec3(),
+            glam::DQuat::from_xyzw(x, y, z, w).normalize(),
+        )
     }
 
     /// The rig's hierarchy.
@@ -369,6 +401,7 @@ mod tests {
             &RigSpec {
                 file: None,
                 align_rest: false,
+                retarget: None,
                 scale: 0.5,
                 lengths,
                 line: 3,
@@ -400,6 +433,7 @@ mod tests {
         let bad = RigSpec {
             file: None,
             align_rest: false,
+            retarget: None,
             scale: 1.0,
             lengths: [("elbow".to_owned(), 1.0)].into(),
             line: 3,

@@ -4,7 +4,8 @@
 //! kind = "grid"             # "grid" (static poses) or "clips" (motion table)
 //! frame = "heading"         # mocap: frame of the poses and parameters: "heading"
 //!                           # (floor below the root, facing +Z), "root" (origin
-//!                           # at the root joint, facing +Z) or "world"
+//!                           # at the root joint, facing +Z), "stand" (grid: the
+//!                           # root's own frame, see below) or "world"
 //! # examples = "set.json"   # a JSON example set instead of mocap (see `examples`)
 //!
 //! [mocap]
@@ -24,6 +25,8 @@
 //! [rig]                     # retarget: see `retarget`
 //! # file = "../../rigs/cmu31.toml"  # a rig file (relative to the spec, or a name in rigs/)
 //! # align_rest = false      # with a file: rotation offsets from the rest poses
+//! # retarget = "hdm05"      # with a file: its [[retarget.map]] of this name
+//! #                         # (default: its [[retarget.joint]] map)
 //! scale = 1.0               # without a file: uniform scale of every offset and the root path
 //! lengths = { rradius = 1.0 } # without a file: per-segment factor on the offset to the parent
 //!
@@ -31,6 +34,7 @@
 //! name = "hand_x"
 //! segment = "rhand"         # parameter: this segment's position ...
 //! component = "x"           # ... component in the build frame
+//! # point = [0, -0.15, 0]   # of this point in the segment's frame (default: origin)
 //! # measure = "speed"       # clips: the root's mean horizontal speed
 //! min = -0.3                # min / max default to the data's range
 //! max = 0.5
@@ -48,6 +52,17 @@
 //! # valid_radius = 0.87     # cells; default √p / 2
 //! # enforce_lengths = true  # W&H limb-length enforcement of each resampled pose
 //! ```
+//!
+//! `frame = "stand"` is for a figure whose root is held by a stand (a
+//! puppet's pelvis on its post): each example is expressed in its root's
+//! own frame (origin at the root joint, axes turning with the root in yaw,
+//! pitch and roll), the parameters are measured there, and the pose is then
+//! placed at the rig file's rest root placement (`root_position`,
+//! `root_rotation`; the origin without a rig file). So a parameter is "where
+//! the hand is relative to the pelvis, in the pelvis' axes" (the quantity a
+//! rig's `frame = "sensor:N"` parameter map measures with a tracker on the
+//! performer's pelvis), and every synthesized pose has its root exactly
+//! where the stand holds it. Grid tables only.
 //!
 //! Unknown keys are errors; every error names the file, the line and the
 //! field.
@@ -101,6 +116,9 @@ pub enum FrameKind {
     Heading,
     /// As `Heading`, with the origin at the root joint (y above the root).
     Root,
+    /// Grid: the root's own frame (full rotation, origin at the root joint)
+    /// for the parameters; poses placed at the rig's rest root placement.
+    Stand,
     /// The mocap's world frame.
     World,
 }
@@ -153,14 +171,17 @@ pub struct ClipSpec {
 }
 
 /// Where an axis' parameter comes from.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Measure {
-    /// Position component (0 = x, 1 = y, 2 = z) of a segment in the build frame.
+    /// Position component (0 = x, 1 = y, 2 = z) of a point of a segment in
+    /// the build frame.
     Position {
         /// Segment name.
         segment: String,
         /// Component index.
         component: usize,
+        /// The point, in the segment's frame (metres; zero: its origin).
+        point: [f64; 3],
     },
     /// Mean horizontal root speed over the clip (clips).
     Speed,
@@ -211,6 +232,8 @@ pub struct RigSpec {
     pub file: Option<PathBuf>,
     /// Compute missing rotation offsets from the rest poses (rig files).
     pub align_rest: bool,
+    /// The rig file's named retarget map to use (`None`: its default map).
+    pub retarget: Option<String>,
     /// Uniform scale.
     pub scale: f64,
     /// Per-segment offset factors.
@@ -284,6 +307,7 @@ struct RawAxis {
     name: Spanned<String>,
     segment: Option<Spanned<String>>,
     component: Option<Spanned<String>>,
+    point: Option<Spanned<[f64; 3]>>,
     measure: Option<Spanned<String>>,
     min: Option<f64>,
     max: Option<f64>,
@@ -299,6 +323,7 @@ struct RawAxis {
 struct RawRig {
     file: Option<Spanned<String>>,
     align_rest: Option<Spanned<bool>>,
+    retarget: Option<Spanned<String>>,
     scale: Option<Spanned<f64>>,
     #[serde(default)]
     lengths: BTreeMap<String, Spanned<f64>>,
@@ -355,7 +380,7 @@ pub fn parse(source: Source, dir: PathBuf) -> Result<Spec, InputError> {
         dir: &dir,
     };
     let kind = p.kind(raw.kind.as_ref())?;
-    let frame = p.frame(raw.frame.as_ref())?;
+    let frame = p.frame(raw.frame.as_ref(), kind)?;
     let input = p.input(&raw, kind)?;
     let axes = p.axes(&raw.axis, &input, kind)?;
     let rig = p.rig(raw.rig.as_ref())?;
@@ -409,15 +434,21 @@ impl Parser<'_> {
         }
     }
 
-    fn frame(&self, frame: Option<&Spanned<String>>) -> Result<FrameKind, InputError> {
+    fn frame(&self, frame: Option<&Spanned<String>>, kind: Kind) -> Result<FrameKind, InputError> {
         match frame.map(|k| (k.get_ref().as_str(), k.span())) {
             None | Some(("heading", _)) => Ok(FrameKind::Heading),
             Some(("root", _)) => Ok(FrameKind::Root),
+            Some(("stand", span)) if kind == Kind::Clips => self.err(
+                span,
+                "frame",
+                "\"stand\" is for grid tables (kind = \"grid\")",
+            ),
+            Some(("stand", _)) => Ok(FrameKind::Stand),
             Some(("world", _)) => Ok(FrameKind::World),
             Some((other, span)) => self.err(
                 span,
                 "frame",
-                format!("expected \"heading\", \"root\" or \"world\", found {other:?}"),
+                format!("expected \"heading\", \"root\", \"stand\" or \"world\", found {other:?}"),
             ),
         }
     }
@@ -674,10 +705,21 @@ impl Parser<'_> {
                         );
                     }
                 };
+                let point = match &r.point {
+                    Some(p) if !p.get_ref().iter().all(|c| c.is_finite()) => {
+                        return self.err(p.span(), &field("point"), "must be finite");
+                    }
+                    Some(p) => *p.get_ref(),
+                    None => [0.0; 3],
+                };
                 Measure::Position {
                     segment: s.get_ref().clone(),
                     component,
+                    point,
                 }
+            }
+            (None, None, Some(m)) if r.point.is_some() => {
+                return self.err(m.span(), &field("point"), "`point` needs `segment`");
             }
             (None, None, Some(m)) => match (m.get_ref().as_str(), kind) {
                 ("speed", Kind::Clips) => Measure::Speed,
@@ -696,6 +738,9 @@ impl Parser<'_> {
                     );
                 }
             },
+            (None, None, None) if r.point.is_some() => {
+                return self.err(a.span(), &field("point"), "`point` needs `segment`");
+            }
             (None, None, None) => Measure::Explicit,
             (Some(s), None, _) => {
                 return self.err(
@@ -746,6 +791,7 @@ impl Parser<'_> {
             return Ok(RigSpec {
                 file: None,
                 align_rest: false,
+                retarget: None,
                 scale: 1.0,
                 lengths: BTreeMap::new(),
                 line: 0,
@@ -785,6 +831,15 @@ impl Parser<'_> {
                 "needs a rig file (`file = ...`)",
             );
         }
+        let retarget = match (&g.retarget, &file) {
+            (Some(r), None) => {
+                return self.err(r.span(), "rig.retarget", "needs a rig file (`file = ...`)");
+            }
+            (Some(r), Some(_)) if r.get_ref().trim().is_empty() => {
+                return self.err(r.span(), "rig.retarget", "must not be empty");
+            }
+            (r, _) => r.as_ref().map(|r| r.get_ref().trim().to_owned()),
+        };
         let scale = match &g.scale {
             Some(s) if !(s.get_ref().is_finite() && *s.get_ref() > 0.0) => {
                 return self.err(s.span(), "rig.scale", "must be a finite number > 0");
@@ -809,6 +864,7 @@ impl Parser<'_> {
             .map_or_else(|| self.line(&r.span()), |f| self.line(&f.span()));
         Ok(RigSpec {
             align_rest: g.align_rest.as_ref().is_some_and(|a| *a.get_ref()),
+            retarget,
             file,
             scale,
             lengths,
@@ -939,10 +995,44 @@ count = 4
             s.axes[0].measure,
             Measure::Position {
                 segment: "rhand".into(),
-                component: 0
+                component: 0,
+                point: [0.0; 3],
             }
         );
         assert_eq!(s.resample.method, "auto");
+    }
+
+    #[test]
+    fn stand_frame_point_and_retarget_map() {
+        let text = GOOD
+            .replace("kind = \"grid\"", "kind = \"grid\"\nframe = \"stand\"")
+            .replace("count = 4", "count = 4\npoint = [0, -0.15, 0]");
+        let s = parse_text(&format!("{text}[rig]\nfile = \"/\"\n")).unwrap_err();
+        assert_eq!(s.field, "rig.file", "{s}");
+        let s = parse_text(&text).unwrap();
+        assert_eq!(s.frame, FrameKind::Stand);
+        assert_eq!(
+            s.axes[0].measure,
+            Measure::Position {
+                segment: "rhand".into(),
+                component: 0,
+                point: [0.0, -0.15, 0.0],
+            }
+        );
+        let clips = "kind = \"clips\"\nframe = \"stand\"\n";
+        let e = parse_text(&format!(
+            "{clips}[mocap]\n[[clip]]\nfile = \"a.bvh\"\ncut = [0, 9]\n"
+        ))
+        .unwrap_err();
+        assert_eq!((e.line, e.field.as_str()), (2, "frame"));
+        let e = parse_text(&format!("{GOOD}[rig]\nretarget = \"hdm05\"\n")).unwrap_err();
+        assert_eq!((e.line, e.field.as_str()), (15, "rig.retarget"));
+        let e = parse_text(&GOOD.replace(
+            "segment = \"rhand\"\ncomponent = \"x\"",
+            "measure = \"speed\"\npoint = [0, 0, 0]",
+        ))
+        .unwrap_err();
+        assert_eq!(e.field, "axis[0].point", "{e}");
     }
 
     #[test]
