@@ -14,6 +14,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// The demo: build the reach table, perform a real recording on the emulated board, draw it.
+    Demo(cmd::demo::Args),
     /// Perform on the emulated board: boot the firmware on QEMU and stream to it.
     Emulate(cmd::emulate::Args),
     /// Instruction counts of the core on the emulated Cortex-M4F.
@@ -36,11 +38,14 @@ enum Command {
     Synth(cmd::synth::Args),
     /// Position a rig to meet weighted goals (JSON in, pose and distances out).
     Solve(cmd::solve::Args),
+    /// Make a tracker recording (CSV) from a mocap clip: virtual trackers on its joints.
+    Record(cmd::record::Args),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(args) => cmd::demo::run(&args),
         Command::Emulate(args) => cmd::emulate::run(&args),
         Command::Icount(args) => cmd::icount::run(&args),
         Command::Sim(args) => cmd::sim::run(&args),
@@ -52,6 +57,7 @@ fn main() -> ExitCode {
         Command::Inspect(args) => cmd::inspect::run(&args),
         Command::Synth(args) => cmd::synth::run(&args),
         Command::Solve(args) => cmd::solve::run(&args),
+        Command::Record(args) => cmd::record::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,514 @@
+//! `marionette demo`: the whole pipeline in one command, on real data.
+//!
+//! 1. **Build** the reach table for the humanoid16 puppet from HDM05 mocap
+//!    (`data/builds/reach_humanoid16.toml`: right-palm position grid, four
+//!    reaching clips retargeted onto `rigs/humanoid16.toml`) and check that
+//!    the rig and table arm the board (`Region::parse`: rig hash, segment
+//!    count and kind match).
+//! 2. **Perform** a held-out take (`data/recordings/reach_hdm05_007.csv`, an
+//!    HDM05 grab the table was not built from, as three 1 kHz trackers:
+//!    right palm, left palm, pelvis) on the emulated board: boot the
+//!    `perform` firmware on QEMU with rig + table in its table region, stream
+//!    the session over the tracker link, decode the Maestro servo commands
+//!    (as `marionette emulate`), and compare every output frame with the
+//!    core run natively on the same bytes. Any difference is an error (exit
+//!    status 1).
+//! 3. **Draw**: the servo curves the board sent, and the figure (the native
+//!    core's solved pose, with its goals) at a few times, in four views.
+//!
+//! Written to `--out` (default `out/`): `reach_humanoid16.bin` (the table
+//! blob), `region.bin` (rig + table, as flashed), `servo_emulated.csv`
+//! (`time_us,ch0..ch15`, µs), `servo_emulated.png`, and `frame_<k>.png`.
+
+use super::CmdError;
+use super::sim::{self, Inputs};
+use crate::build::{self, Built, Progress, spec};
+use crate::import::csv::read_tracker_csv;
+use crate::perform::{self, Pacing, Run};
+use crate::render::{self, Figure, Mark, PlotOptions, Series};
+use crate::rigfile;
+use glam::{DQuat, DVec3};
+use marionette_core::frame::{Cause, Region};
+use marionette_core::goal::{Attach, Frame, GoalSet, Target};
+use marionette_core::pose::{MAX_SEGMENTS, Pose};
+use marionette_core::rig::{MAX_PARAMS, Rig};
+use marionette_core::wire::{ErrorCounters, MAX_GOALS, Message, StatusReason, TrackerFrame};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Arguments of `marionette demo`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The table's build spec.
+    #[arg(long, default_value = "data/builds/reach_humanoid16.toml")]
+    pub spec: PathBuf,
+    /// The rig file.
+    #[arg(long, default_value = "rigs/humanoid16.toml")]
+    pub rig: PathBuf,
+    /// The tracker recording (CSV).
+    #[arg(long, default_value = "data/recordings/reach_hdm05_007.csv")]
+    pub recording: PathBuf,
+    /// Where to write the table, servo curves and pictures.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// How many frames of the figure to draw (evenly spaced in time).
+    #[arg(long, default_value_t = 4)]
+    pub frames: usize,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A path as given if it exists, else relative to the workspace root (so
+/// the defaults work from any directory of a source checkout).
+#[must_use]
+pub fn repo_path(p: &Path) -> PathBuf {
+    if p.exists() || p.is_absolute() {
+        return p.to_path_buf();
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let there = root.join(p);
+    if there.exists() {
+        there
+    } else {
+        p.to_path_buf()
+    }
+}
+
+/// Builds the table of a spec (no progress bar).
+pub fn build_table(spec_path: &Path) -> Result<Built, CmdError> {
+    let spec = spec::read(spec_path)?;
+    let progress = Progress::new(false);
+    let data = build::load(&spec, &progress)?;
+    Ok(build::build(&spec, &data, None, &progress)?)
+}
+
+/// The region image and session of a rig file, a table blob and a recording.
+pub fn inputs(rig: &Path, table: &[u8], recording: &Path) -> Result<Inputs, CmdError> {
+    let rig = rigfile::load(&rigfile::resolve(rig))?;
+    let rig_blob = rigfile::to_blob(&rig)?;
+    let samples = read_tracker_csv(recording)?;
+    let frames = perform::frames(&samples)?;
+    Ok(Inputs {
+        region: perform::region(&rig_blob, Some(table)),
+        session: perform::session(&frames)?,
+        frames: frames.len(),
+        times: frames.iter().map(|f| f.time_us).collect(),
+        period_us: rig.desc().frame_period_us,
+    })
+}
+
+/// A native run with the solved poses of chosen frames.
+#[derive(Debug)]
+pub struct Native {
+    /// Whether the board can arm with this region, and why not.
+    pub reason: StatusReason,
+    /// The servo targets.
+    pub run: Run,
+    /// `(sequence number, solved world pose)` of the sampled frames.
+    pub poses: Vec<(u32, Pose<MAX_SEGMENTS>)>,
+    /// Frames whose parameters were clamped or projected into the table.
+    pub adjusted: u32,
+    /// Frames dropped because synthesis or solving failed.
+    pub failed: u32,
+}
+
+/// Runs the session natively, keeping the poses of the frames `sample`
+/// (sequence numbers, from 1).
+pub fn native(inputs: &Inputs, sample: &[u32]) -> Result<Native, CmdError> {
+    let reason = Region::parse(&inputs.region).reason;
+    let mut poses = Vec::new();
+    let (mut adjusted, mut failed) = (0, 0);
+    let run = perform::simulate_with(&inputs.region, &inputs.session, &mut |p, u| {
+        if let Some(Cause::Frame(seq)) = u.outputs
+            && sample.contains(&seq)
+        {
+            poses.push((seq, *p.pose()));
+        }
+        adjusted = p.adjusted_frames();
+        failed = p.failed_frames();
+    })?;
+    Ok(Native {
+        reason,
+        run,
+        poses,
+        adjusted,
+        failed,
+    })
+}
+
+/// Evenly spaced frame sequence numbers (1-based) out of `frames`.
+#[must_use]
+pub fn sample_frames(frames: usize, count: usize) -> Vec<u32> {
+    let last = frames.saturating_sub(1);
+    let count = count.min(frames);
+    (0..count)
+        .map(|k| {
+            let i = (k * last + (count - 1).max(1) / 2) / (count - 1).max(1);
+            u32::try_from(i + 1).unwrap_or(u32::MAX)
+        })
+        .collect()
+}
+
+/// One servo's range over the performance.
+#[derive(Debug, Serialize)]
+pub struct ServoRange {
+    /// Output channel.
+    pub channel: u8,
+    /// The joint and DOF axis it turns (`r_forearm.x`).
+    pub joint: String,
+    /// Lowest and highest target sent, µs.
+    pub sent_us: [f64; 2],
+    /// The pulses of the joint's limits (the most the solver may ask), µs.
+    pub limits_us: [f64; 2],
+}
+
+/// What the demo measured.
+#[derive(Debug, Serialize)]
+pub struct Summary {
+    /// The build spec.
+    pub spec: String,
+    /// Examples the table was built from, and from how many clips.
+    pub examples: usize,
+    /// Clips.
+    pub clips: usize,
+    /// The resampling method cross-validation chose.
+    pub method: String,
+    /// Valid grid cells of all.
+    pub valid_cells: [usize; 2],
+    /// Table blob bytes.
+    pub table_bytes: usize,
+    /// Seconds to build the table.
+    pub build_seconds: f64,
+    /// `Region::parse` on rig + table: why the board can (not) arm.
+    pub arm: String,
+    /// Tracker frames streamed.
+    pub frames_in: usize,
+    /// Servo frames the board sent for them.
+    pub frames_out: usize,
+    /// Output frames differing from the native core (missing ones count).
+    pub mismatches: usize,
+    /// Easing steps to rest after the last frame (the board's).
+    pub rest_steps: usize,
+    /// Easing steps to rest natively.
+    pub rest_steps_native: usize,
+    /// Replies decoded from the board.
+    pub replies: usize,
+    /// The board's receive errors (last telemetry), summed over counters.
+    pub errors: u32,
+    /// Frames whose parameters the table had to clamp or project (native).
+    pub adjusted_frames: u32,
+    /// Frames dropped because synthesis or solving failed (native).
+    pub failed_frames: u32,
+    /// Median right-hand goal residual over the board's telemetry, mm.
+    pub hand_residual_mm: f64,
+    /// Per servo.
+    pub servos: Vec<ServoRange>,
+    /// Files written.
+    pub files: Vec<String>,
+    /// Wall-clock seconds of the whole demo.
+    pub seconds: f64,
+    /// Wall-clock seconds on the emulated board (boot included).
+    pub board_seconds: f64,
+}
+
+/// Sum of all receive-error counters.
+fn error_total(e: &ErrorCounters) -> u32 {
+    [
+        e.cobs, e.crc, e.decode, e.oversize, e.version, e.lost, e.stale, e.range,
+    ]
+    .iter()
+    .fold(0u32, |a, b| a.saturating_add(*b))
+}
+
+/// The last telemetry's error total and the median of goal 0's residuals.
+fn telemetry(replies: &[Message]) -> (u32, f64) {
+    let mut errors = 0;
+    let mut hand: Vec<f64> = Vec::new();
+    for r in replies {
+        if let Message::Telemetry(t) = r {
+            errors = error_total(&t.errors);
+            if let Some(x) = t.goal_residuals.iter().next() {
+                hand.push(f64::from(*x));
+            }
+        }
+    }
+    hand.sort_by(f64::total_cmp);
+    let median = hand.get(hand.len() / 2).copied().unwrap_or(f64::NAN);
+    (errors, median * 1000.0)
+}
+
+/// Every servo's sent range and joint-limit pulses.
+fn servo_ranges(rig: &Rig<'_>, run: &Run) -> Vec<ServoRange> {
+    let sent = sim::ranges(run);
+    let body = rig.body();
+    rig.servos()
+        .iter()
+        .map(|s| {
+            let seg = body.segment(usize::from(s.segment));
+            let dof = seg.and_then(|g| g.joint.dofs().get(usize::from(s.dof)).copied());
+            let cal = s.calibration();
+            let limits = dof.map_or([f64::NAN; 2], |d| {
+                let (a, b) = (
+                    f64::from(cal.pulse_us(d.min)),
+                    f64::from(cal.pulse_us(d.max)),
+                );
+                [a.min(b), a.max(b)]
+            });
+            let axis = dof.map_or("?", |d| match d.axis {
+                marionette_core::body::Axis::X => "x",
+                marionette_core::body::Axis::Y => "y",
+                marionette_core::body::Axis::Z => "z",
+            });
+            ServoRange {
+                channel: s.channel,
+                joint: format!("{}.{axis}", seg.map_or("?", |g| g.name)),
+                sent_us: sent
+                    .get(usize::from(s.channel))
+                    .copied()
+                    .unwrap_or([f64::NAN; 2]),
+                limits_us: limits,
+            }
+        })
+        .collect()
+}
+
+/// The goals of one tracker frame as marks on a solved pose.
+fn marks(rig: &Rig<'_>, frame: &TrackerFrame, pose: &Pose<MAX_SEGMENTS>) -> Vec<Mark> {
+    let mut params = [0.0f32; MAX_PARAMS];
+    let mut goals = GoalSet::<MAX_GOALS>::new();
+    let _ = rig.map_sensors(frame.sensors.as_slice(), &mut params, &mut goals);
+    let body = rig.body();
+    let world: Vec<(DVec3, DQuat)> = pose
+        .positions()
+        .iter()
+        .zip(pose.rotations())
+        .map(|(p, q)| (p.as_dvec3(), q.as_dquat()))
+        .collect();
+    let placed = |i: usize| world.get(i).copied();
+    goals
+        .as_slice()
+        .iter()
+        .filter(|g| g.weight > 0.0)
+        .filter_map(|g| {
+            let seg = usize::from(g.segment);
+            let (o, r) = placed(seg)?;
+            let from = match g.attach {
+                Attach::Touch => render::touch_point(&body, &world, seg)?,
+                Attach::Point(p) => o + r * p.as_dvec3(),
+            };
+            let (fo, fr) = match g.frame {
+                Frame::World => (DVec3::ZERO, DQuat::IDENTITY),
+                Frame::Segment(s) => placed(usize::from(s))?,
+            };
+            let target = match g.target {
+                Target::Position(t) => fo + fr * t.as_dvec3(),
+                Target::Plane { normal, offset, .. } => {
+                    let n = (fr * normal.as_dvec3()).normalize();
+                    let d = n.dot(from - fo) - f64::from(offset);
+                    from - n * d
+                }
+                Target::Orientation(_) => return None,
+            };
+            let name = body.segment(seg).map_or("?", |s| s.name);
+            Some(Mark {
+                target,
+                from: Some(from),
+                label: format!("{name} ×{}", g.weight),
+            })
+        })
+        .collect()
+}
+
+/// Draws the sampled poses: `frame_<k>.png`.
+fn draw_frames(
+    rig: &Rig<'_>,
+    frames: &[TrackerFrame],
+    poses: &[(u32, Pose<MAX_SEGMENTS>)],
+    out: &Path,
+) -> Result<Vec<PathBuf>, CmdError> {
+    let body = rig.body();
+    let first = frames.first().map_or(0, |f| f.time_us);
+    let mut files = Vec::new();
+    for (k, (seq, pose)) in poses.iter().enumerate() {
+        let Some(frame) = frames.iter().find(|f| f.seq == *seq) else {
+            continue;
+        };
+        let t = f64::from(frame.time_us.wrapping_sub(first)) * 1e-6;
+        let title = format!(
+            "humanoid16, t = {t:.2} s (tracker frame {seq} of {}): solved pose and goals",
+            frames.len()
+        );
+        let mut fig = Figure::from_pose(&body, pose, title)?;
+        fig.goals = marks(rig, frame, pose);
+        let path = out.join(format!("frame_{k}.png"));
+        render::render(&fig, &path)?;
+        files.push(path);
+    }
+    Ok(files)
+}
+
+/// Plots `servo_emulated.csv` into `servo_emulated.png`.
+fn plot_servos(csv: &Path) -> Result<PathBuf, CmdError> {
+    let text = std::fs::read_to_string(csv).map_err(|e| format!("{}: {e}", csv.display()))?;
+    let series = Series::parse_csv(&text).map_err(|e| format!("{}: {e}", csv.display()))?;
+    let path = csv.with_extension("png");
+    let opt = PlotOptions {
+        title: "servo targets sent by the emulated board (HDM05 grab, held out)".into(),
+        y_label: "pulse (µs)".into(),
+        ..PlotOptions::default()
+    };
+    render::plot(&series, &path, &opt)?;
+    Ok(path)
+}
+
+/// Runs the demo and prints its summary.
+pub fn run(args: &Args) -> Result<(), CmdError> {
+    let start = Instant::now();
+    let (spec_path, rig_path) = (repo_path(&args.spec), repo_path(&args.rig));
+    let recording = repo_path(&args.recording);
+    std::fs::create_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    let built = build_table(&spec_path)?;
+    let build_seconds = start.elapsed().as_secs_f64();
+    let table_file = args.out.join("reach_humanoid16.bin");
+    std::fs::write(&table_file, &built.blob)
+        .map_err(|e| format!("{}: {e}", table_file.display()))?;
+    let inputs = inputs(&rig_path, &built.blob, &recording)?;
+    let region = Region::parse(&inputs.region);
+    let rig = region.rig.as_ref().ok_or("the rig blob is invalid")?;
+    if region.reason != StatusReason::Ok {
+        return Err(format!(
+            "the board would not arm with {} + {}: {:?}",
+            rig_path.display(),
+            spec_path.display(),
+            region.reason
+        )
+        .into());
+    }
+    let tracker_frames = perform::frames(&read_tracker_csv(&recording)?)?;
+    let sample = sample_frames(inputs.frames, args.frames);
+    let native = native(&inputs, &sample)?;
+    let (board, emulated, _) =
+        super::emulate::compare(&inputs, &args.out, Pacing::AsFastAsPossible)?;
+    let servo_csv = PathBuf::from(&emulated.servo_csv);
+    let mut files = vec![
+        table_file.display().to_string(),
+        args.out.join("region.bin").display().to_string(),
+        emulated.servo_csv.clone(),
+        plot_servos(&servo_csv)?.display().to_string(),
+    ];
+    for f in draw_frames(rig, &tracker_frames, &native.poses, &args.out)? {
+        files.push(f.display().to_string());
+    }
+    let (errors, hand_residual_mm) = telemetry(&board.replies);
+    let summary = Summary {
+        spec: spec_path.display().to_string(),
+        examples: built.report.examples,
+        clips: built.report.groups,
+        method: built.report.method.to_string(),
+        valid_cells: [built.report.valid_cells, built.report.cells],
+        table_bytes: built.blob.len(),
+        build_seconds,
+        arm: format!("{:?}", region.reason),
+        frames_in: inputs.frames,
+        frames_out: emulated.frame_outputs,
+        mismatches: emulated.mismatches,
+        rest_steps: emulated.rest_steps,
+        rest_steps_native: native.run.rest_targets.len(),
+        replies: emulated.replies,
+        errors,
+        adjusted_frames: native.adjusted,
+        failed_frames: native.failed,
+        hand_residual_mm,
+        servos: servo_ranges(rig, &board),
+        files,
+        seconds: start.elapsed().as_secs_f64(),
+        board_seconds: emulated.seconds,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        print!("{}", text(&summary, inputs.period_us));
+    }
+    if summary.mismatches > 0 {
+        return Err("the emulated board's servo output differs from the native core".into());
+    }
+    Ok(())
+}
+
+/// The summary as text.
+fn text(s: &Summary, period_us: u32) -> String {
+    use std::fmt::Write as _;
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "table: {} -> {} examples from {} clips, {}, {}/{} cells valid, {} bytes ({:.1} s)",
+        s.spec,
+        s.examples,
+        s.clips,
+        s.method,
+        s.valid_cells[0],
+        s.valid_cells[1],
+        s.table_bytes,
+        s.build_seconds
+    );
+    let _ = writeln!(o, "rig + table: {} (the board arms)", s.arm);
+    let _ = writeln!(
+        o,
+        "emulated board: {} tracker frames in ({:.2} s at {} Hz), {} servo frames out, \
+         {} differ from the native core",
+        s.frames_in,
+        s.frames_in as f64 * f64::from(period_us) * 1e-6,
+        1_000_000 / period_us.max(1),
+        s.frames_out,
+        s.mismatches
+    );
+    let _ = writeln!(
+        o,
+        "after the last frame: {} steps to rest (native {}); {} replies, {} receive errors; \
+         {} frames clamped/projected into the table, {} failed; right-hand goal residual \
+         median {:.2} mm",
+        s.rest_steps,
+        s.rest_steps_native,
+        s.replies,
+        s.errors,
+        s.adjusted_frames,
+        s.failed_frames,
+        s.hand_residual_mm
+    );
+    let _ = writeln!(
+        o,
+        "servos (sent range, µs; joint-limit pulses in brackets):"
+    );
+    for v in &s.servos {
+        let _ = writeln!(
+            o,
+            "  ch{:<2} {:<15} {:>6.1} .. {:>6.1}  [{:>6.1} .. {:>6.1}]",
+            v.channel, v.joint, v.sent_us[0], v.sent_us[1], v.limits_us[0], v.limits_us[1]
+        );
+    }
+    let _ = writeln!(o, "wrote:");
+    for f in &s.files {
+        let _ = writeln!(o, "  {f}");
+    }
+    let _ = writeln!(
+        o,
+        "{:.1} s in all ({:.1} s on the emulated board)",
+        s.seconds, s.board_seconds
+    );
+    o
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sampled_frames_are_spread_evenly() {
+        assert_eq!(sample_frames(2134, 4), vec![1, 712, 1423, 2134]);
+        assert_eq!(sample_frames(10, 1), vec![1]);
+        assert_eq!(sample_frames(3, 5), vec![1, 2, 3]);
+        assert!(sample_frames(0, 4).is_empty());
+    }
+}
