@@ -1,7 +1,7 @@
 //! `marionette demo`: the whole pipeline in one command, on real data.
 //!
 //! 1. **Build** the reach table for the humanoid16 puppet from HDM05 mocap
-//!    (`data/builds/reach_humanoid16.toml`: right-palm position grid, four
+//!    (`data/builds/reach_humanoid16.toml`: right-palm position grid, five
 //!    reaching clips retargeted onto `rigs/humanoid16.toml`) and check that
 //!    the rig and table arm the board (`Region::parse`: rig hash, segment
 //!    count and kind match).
