@@ -702,7 +702,9 @@ fn to_cell_units(axis: &Axis, inv_step: f32, p: f32) -> (f32, bool) {
         }
         AxisKind::Cyclic { .. } => {
             let w = u - n * math::floor(u / n);
-            let w = snap(if w >= n || w < 0.0 { 0.0 } else { w }, tol);
+            // Not `w >= n || w < 0`: a huge parameter makes `u` infinite and
+            // `w` NaN, which must wrap to 0 too (a NaN weight is a NaN pose).
+            let w = snap(if (0.0..n).contains(&w) { w } else { 0.0 }, tol);
             (if w >= n { 0.0 } else { w }, false)
         }
     }

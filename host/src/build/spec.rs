@@ -359,14 +359,12 @@ fn field_at(src: &Source, at: usize) -> String {
         .rfind('\n')
         .map_or(0, |i| i + 1);
     let line = src.text[start..].lines().next().unwrap_or("").trim();
-    if let Some(header) = line.strip_prefix('[') {
-        return header
-            .trim_matches(|c| c == '[' || c == ']')
-            .trim()
-            .to_owned();
-    }
-    line.split_once('=')
-        .map_or_else(|| "spec".to_owned(), |(k, _)| k.trim().to_owned())
+    let field = match line.strip_prefix('[') {
+        Some(header) => header.trim_matches(|c| c == '[' || c == ']').trim(),
+        None => line.split_once('=').map_or("", |(k, _)| k.trim()),
+    };
+    // A bare `[` or ` = 1` names no key: the spec as a whole.
+    if field.is_empty() { "spec" } else { field }.to_owned()
 }
 
 /// Parses a spec from its text; `dir` resolves relative paths.

@@ -70,7 +70,8 @@ pub use reach::ReachTree;
 pub use tree::MAX_GOALS;
 
 use crate::body::{Angles, Body, BodyError};
-use crate::goal::{Frame, Goal, GoalSet, Residual};
+use crate::goal::{Attach, Frame, Goal, GoalSet, Residual, Target};
+use crate::math;
 use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
 use glam::Vec3;
 
@@ -178,7 +179,9 @@ pub enum SolveError {
     Body(BodyError),
     /// The body has more segments than the state's capacity.
     Capacity,
-    /// Goal `i` names a segment that does not exist, or has a NaN weight.
+    /// Goal `i` names a segment that does not exist, has a NaN weight, or is
+    /// active with a weight above [`WEIGHT_LIMIT`] or a target or attached
+    /// point beyond [`GOAL_LIMIT`] (NaN and infinities included).
     BadGoal(u8),
     /// [`Method::TreeDls`]: more active goals than [`MAX_GOALS`].
     TooManyGoals,
@@ -202,6 +205,37 @@ pub struct Report<const G: usize> {
     pub residuals: [f32; G],
     /// The weighted error `Σ weight · residual²` over the active goals.
     pub error: f32,
+}
+
+/// Largest accepted magnitude of any coordinate of an active goal's target
+/// (position, plane normal and offset, orientation quaternion) and attached
+/// point, metres: far beyond any rig, and small enough that no squared
+/// distance overflows `f32`. A goal outside it (NaN and infinities included)
+/// is refused with [`SolveError::BadGoal`].
+pub const GOAL_LIMIT: f32 = 1.0e6;
+
+/// Largest accepted weight of an active goal (as on the wire); a heavier
+/// one is refused with [`SolveError::BadGoal`].
+pub const WEIGHT_LIMIT: f32 = 1.0e6;
+
+/// Whether every coordinate of `v` is within ±[`GOAL_LIMIT`] (false for NaN).
+fn bounded(v: &[f32]) -> bool {
+    v.iter().all(|x| math::abs(*x) <= GOAL_LIMIT)
+}
+
+/// Whether a goal's weight is within [`WEIGHT_LIMIT`] and its target and
+/// attached point within [`GOAL_LIMIT`].
+fn bounded_goal(g: &Goal) -> bool {
+    let target = match g.target {
+        Target::Position(p) => bounded(&p.to_array()),
+        Target::Plane { normal, offset, .. } => bounded(&normal.to_array()) && bounded(&[offset]),
+        Target::Orientation(q) => bounded(&q.to_array()),
+    };
+    let point = match g.attach {
+        Attach::Point(p) => bounded(&p.to_array()),
+        Attach::Touch => true,
+    };
+    target && point && g.weight <= WEIGHT_LIMIT
 }
 
 /// Positions the body: moves `angles` (the warm start) to meet `goals` as well as
@@ -297,7 +331,11 @@ impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
                 Frame::World => true,
                 Frame::Segment(s) => usize::from(s) < body.len(),
             };
-            if usize::from(g.segment) >= body.len() || !frame_ok || g.weight.is_nan() {
+            if usize::from(g.segment) >= body.len()
+                || !frame_ok
+                || g.weight.is_nan()
+                || (g.is_active() && !bounded_goal(g))
+            {
                 return Err(SolveError::BadGoal(i));
             }
         }
