@@ -132,3 +132,6 @@ pub mod synth_ref {
         }
     }
 }
+
+/// Fuzz target bodies (shared by `tests/fuzz/` and `tests/fuzz_replay.rs`).
+pub mod fuzz_targets;
