@@ -180,6 +180,10 @@ impl Collected {
         self.0.lock().map(|v| v.len()).unwrap_or(0)
     }
 
+    fn check(&self, done: &dyn Fn(&[u8]) -> bool) -> bool {
+        self.0.lock().map(|v| done(&v)).unwrap_or(false)
+    }
+
     fn take(&self) -> Vec<u8> {
         self.0
             .lock()
@@ -298,6 +302,19 @@ impl Emulator {
     /// has exited.
     pub fn wait_servo_bytes(&mut self, n: usize) -> Result<(), QemuError> {
         while self.servo_out.len() < n {
+            self.remaining()?;
+            if self.child.try_wait()?.is_some() {
+                break;
+            }
+            thread::sleep(Duration::from_millis(1));
+        }
+        Ok(())
+    }
+
+    /// Waits until the bytes the board has sent on its tracker link (its
+    /// replies) satisfy `done`, or it has exited.
+    pub fn wait_replies(&mut self, done: impl Fn(&[u8]) -> bool) -> Result<(), QemuError> {
+        while !self.tracker_out.check(&done) {
             self.remaining()?;
             if self.child.try_wait()?.is_some() {
                 break;

@@ -5,15 +5,20 @@
 //!
 //! Run it through the host, which builds it, boots QEMU and streams input:
 //! `cargo run --release -p marionette-host -- emulate` (from the repository root).
+//!
+//! It prints one console line, `boot`, when it starts: a reset of the board
+//! would print a second one (the fault-injection tests count them).
 #![no_std]
 #![no_main]
 
 use cortex_m_rt::entry;
 use marionette_firmware::app;
 use marionette_firmware::board::{Board, qemu::Qemu};
+use marionette_firmware::console::Line;
 
 #[entry]
 fn main() -> ! {
+    Line::new().str("boot").print();
     let mut board = Qemu::init();
     let outcome = app::run(&mut board);
     board.finish(outcome)
