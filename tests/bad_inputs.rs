@@ -531,8 +531,8 @@ fn solve_goals(text: &str) -> Result<(), String> {
         .map_err(|e| e.to_string())
 }
 
-/// The goals file's errors name the file and the field (and, for JSON
-/// syntax, the line and column); cases the CLI test (`tests/cli_solve.rs`)
+/// The goals file's errors name the file, the line and the field (and, for
+/// JSON syntax, the column); cases the CLI test (`tests/cli_solve.rs`)
 /// does not cover.
 #[test]
 fn bad_goals_files_name_the_file_and_the_field() {
@@ -554,43 +554,43 @@ fn bad_goals_files_name_the_file_and_the_field() {
             "goals not an array",
             "\"goals\": [",
             "\"goals\": 3, \"x\": [",
-            &["goals.json: x: unknown field"],
+            &["goals.json:5: x: unknown field"],
         ),
         (
             "goal not an object",
             "{\"segment\": \"r_forearm\", \"target\": [-0.1, 0.6, 0.2], \"weight\": 10}",
             "[1, 2]",
-            &["goals.json: goals[0]: expected an object"],
+            &["goals.json:6: goals[0]: expected an object"],
         ),
         (
             "target with a string",
             "[0.2, 0.5, 0.1]",
             "[0.2, \"up\", 0.1]",
-            &["goals.json: goals[1].target[1]", "expected a number"],
+            &["goals.json:7: goals[1].target[1]", "expected a number"],
         ),
         (
             "point with four numbers",
             "[0, -0.1, 0]",
             "[0, -0.1, 0, 1]",
-            &["goals.json: goals[1].point", "3 numbers"],
+            &["goals.json:7: goals[1].point", "3 numbers"],
         ),
         (
             "weight overflows f32",
             "\"weight\": 5",
             "\"weight\": 1e300",
-            &["goals.json: goals[1].weight", "finite"],
+            &["goals.json:7: goals[1].weight", "finite"],
         ),
         (
             "start position not an array",
             "\"position\": [-0.12, 0.7, 0.0]",
             "\"position\": -0.12",
-            &["goals.json: start.segments[0].position", "3 numbers"],
+            &["goals.json:3: start.segments[0].position", "3 numbers"],
         ),
         (
             "unknown start key",
             "\"rotation\": [1, 0, 0, 0]",
             "\"rotation\": [1, 0, 0, 0], \"scale\": 2",
-            &["goals.json: start.segments[0].scale: unknown field"],
+            &["goals.json:3: start.segments[0].scale: unknown field"],
         ),
     ];
     let mut failures = Vec::new();

@@ -238,52 +238,52 @@ fn bad_inputs_name_the_file_and_the_field() {
             "{\"goals\": [{\"segment\": \"r_forearm\", \"target\": [0, 1e999, 0], \"weight\": 1}]}",
             &["goals.json:1:", "out of range"],
         ),
-        ("[]", &["goals.json: (top level)"]),
-        ("{\"goal\": []}", &["goals.json: goal: unknown field"]),
-        ("{}", &["goals.json: goals: missing"]),
+        ("[]", &["goals.json:1: (top level)"]),
+        ("{\"goal\": []}", &["goals.json:1: goal: unknown field"]),
+        ("{}", &["goals.json:1: goals: missing"]),
         (
             "{\"goals\": [{\"segment\": \"r_hand\", \"target\": [0, 1, 0], \"weight\": 1}]}",
-            &["goals.json: goals[0].segment", "r_hand"],
+            &["goals.json:1: goals[0].segment", "r_hand"],
         ),
         (
             "{\"goals\": [{\"segment\": \"r_forearm\", \"target\": [0, 1e39, 0], \"weight\": 1}]}",
-            &["goals.json: goals[0].target[1]", "finite"],
+            &["goals.json:1: goals[0].target[1]", "finite"],
         ),
         (
             "{\"goals\": [{\"segment\": \"r_forearm\", \"target\": [0, 1], \"weight\": 1}]}",
-            &["goals.json: goals[0].target", "3 numbers"],
+            &["goals.json:1: goals[0].target", "3 numbers"],
         ),
         (
             "{\"goals\": [{\"segment\": \"r_forearm\", \"target\": [0, 1, 0]}]}",
-            &["goals.json: goals[0].weight: missing"],
+            &["goals.json:1: goals[0].weight: missing"],
         ),
         (
             "{\"goals\": [{\"segment\": \"r_forearm\", \"target\": [0, 1, 0], \"weight\": -2}]}",
-            &["goals.json: goals[0].weight"],
+            &["goals.json:1: goals[0].weight"],
         ),
         (
             "{\"goals\": [{\"segment\": \"r_forearm\", \"target\": [0, 1, 0], \"wieght\": 1}]}",
-            &["goals.json: goals[0].wieght: unknown field"],
+            &["goals.json:1: goals[0].wieght: unknown field"],
         ),
         (
             "{\"goals\": [{\"segment\": \"r_forearm\", \"target\": [0, 1, 0], \"weight\": 1, \"point\": [0, \"a\", 0]}]}",
-            &["goals.json: goals[0].point[1]"],
+            &["goals.json:1: goals[0].point[1]"],
         ),
         (
             "{\"start\": \"sitting\", \"goals\": []}",
-            &["goals.json: start", "sitting"],
+            &["goals.json:1: start", "sitting"],
         ),
         (
             "{\"start\": {\"segments\": [{\"name\": \"tail\", \"position\": [0,0,0], \"rotation\": [1,0,0,0]}]}, \"goals\": []}",
-            &["goals.json: start.segments[0].name", "tail"],
+            &["goals.json:1: start.segments[0].name", "tail"],
         ),
         (
             "{\"start\": {\"segments\": [{\"name\": \"head\", \"position\": [0,0,0], \"rotation\": [0,0,0,0]}]}, \"goals\": []}",
-            &["goals.json: start.segments[0].rotation"],
+            &["goals.json:1: start.segments[0].rotation"],
         ),
         (
             "{\"start\": {\"segments\": [{\"name\": \"head\", \"position\": [0,0,0], \"rotation\": [1,0,0,0]}, {\"name\": \"head\", \"position\": [0,0,0], \"rotation\": [1,0,0,0]}]}, \"goals\": []}",
-            &["goals.json: start.segments[1].name", "twice"],
+            &["goals.json:1: start.segments[1].name", "twice"],
         ),
     ];
     let mut failures = Vec::new();

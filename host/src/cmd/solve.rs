@@ -38,9 +38,10 @@
 //! of the pulled point and its distance to the target (m); `iterations` and
 //! `converged` as the solver reports them.
 //!
-//! Errors name the file and the field: JSON syntax errors with line and
-//! column, then `goals.json: goals[2].segment: unknown segment "hand"` and so
-//! on; rig-file errors as [`crate::rigfile`] reports them.
+//! Errors name the file, the line and the field: JSON syntax errors with
+//! line and column, then `goals.json:7: goals[2].segment: unknown segment
+//! "hand"` and so on (the line where the field's value starts, or its
+//! object when it is missing); rig-file errors as [`crate::rigfile`] reports them.
 
 use std::path::{Path, PathBuf};
 
@@ -183,10 +184,13 @@ pub enum GoalsError {
         message: String,
     },
     /// A field is missing, of the wrong type, or refers to nothing.
-    #[error("{file}: {field}: {message}")]
+    #[error("{file}:{line}: {field}: {message}")]
     Field {
         /// The file.
         file: String,
+        /// 1-based line where the field's value starts (or where its
+        /// object starts, when it is missing).
+        line: usize,
         /// The field path (`goals[2].target[1]`).
         field: String,
         /// What is wrong.
@@ -314,11 +318,12 @@ pub fn summary(rig: &str, out: &SolveOutput) -> String {
 /// A parsed goals document.
 struct Doc<'t> {
     file: &'t str,
+    text: &'t str,
     root: Value,
 }
 
 impl<'t> Doc<'t> {
-    fn parse(text: &str, file: &'t str) -> Result<Self, GoalsError> {
+    fn parse(text: &'t str, file: &'t str) -> Result<Self, GoalsError> {
         let root: Value = serde_json::from_str(text).map_err(|e| GoalsError::Syntax {
             file: file.to_string(),
             line: e.line(),
@@ -330,7 +335,7 @@ impl<'t> Doc<'t> {
                 .unwrap_or_default()
                 .to_string(),
         })?;
-        let doc = Doc { file, root };
+        let doc = Doc { file, text, root };
         let Some(obj) = doc.root.as_object() else {
             return Err(doc.field("(top level)", "expected an object {\"start\", \"goals\"}"));
         };
@@ -346,6 +351,7 @@ impl<'t> Doc<'t> {
     fn field(&self, field: &str, message: impl Into<String>) -> GoalsError {
         GoalsError::Field {
             file: self.file.to_string(),
+            line: crate::locate::line(self.text, field),
             field: field.to_string(),
             message: message.into(),
         }
