@@ -53,6 +53,12 @@ pub enum IcountError {
     /// The bench's table region could not be made.
     #[error("bench table region: {0}")]
     Region(String),
+    /// The stack session's recording could not be read.
+    #[error(transparent)]
+    Import(#[from] crate::import::ImportError),
+    /// The stack session failed on the emulated board.
+    #[error(transparent)]
+    Perform(#[from] perform::PerformError),
     /// A row names a baseline that no earlier row has.
     #[error("row {row} names baseline {baseline}, which is not an earlier row")]
     UnknownBaseline {
@@ -150,6 +156,29 @@ pub fn run_bench() -> Result<String, IcountError> {
         return Err(IcountError::Status(out.status));
     }
     Ok(out.console)
+}
+
+/// The deepest stack of the `perform` firmware, bytes: the first `frames`
+/// time steps of the bundled tracker recording performed on the bench's
+/// table region (the whole live loop, fail-safe easing included).
+pub fn perform_stack(frames: usize) -> Result<Option<u32>, IcountError> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let samples =
+        crate::import::csv::read_tracker_csv(&root.join("data/recordings/reach_hdm05_007.csv"))?;
+    let mut all = perform::frames(&samples)?;
+    all.truncate(frames);
+    let session = perform::session(&all)?;
+    let mut file = tempfile::NamedTempFile::new().map_err(QemuError::Io)?;
+    std::io::Write::write_all(&mut file, &bench_region()?).map_err(QemuError::Io)?;
+    let (run, _) = perform::emulate(
+        file.path(),
+        &session,
+        16,
+        all.len(),
+        perform::Pacing::AsFastAsPossible,
+        Duration::ZERO,
+    )?;
+    Ok(run.board_stack)
 }
 
 /// Builds and runs the bench firmware under `-icount` and returns its rows.

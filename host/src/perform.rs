@@ -250,6 +250,9 @@ pub struct Run {
     pub rest_targets: Vec<Vec<u16>>,
     /// Replies the board sent (decoded).
     pub replies: Vec<Message>,
+    /// The deepest stack the emulated board reached, bytes (measured by
+    /// painting; `None` for a native run).
+    pub board_stack: Option<u32>,
 }
 
 /// Runs a session natively through the core.
@@ -354,6 +357,7 @@ pub fn emulate(
             frame_targets: targets,
             rest_targets: rest,
             replies,
+            board_stack: crate::icount::stack_bytes(&out.console),
         },
         out.servo,
     ))

@@ -12,13 +12,23 @@ pub struct Args {
 }
 
 /// Builds and runs the bench firmware under `-icount` and prints its rows.
+/// Time steps of the bundled recording performed to measure the `perform`
+/// firmware's stack.
+const PERFORM_FRAMES: usize = 500;
+
 pub fn run(args: &Args) -> Result<(), CmdError> {
     let console = icount::run_bench()?;
     let rows = icount::parse(&console)?;
     let perform = icount::footprint(&crate::qemu::build_firmware("perform")?)?;
     let stack = icount::stack_bytes(&console);
+    let perform_stack = icount::perform_stack(PERFORM_FRAMES)?;
     if args.json {
-        let doc = serde_json::json!({ "rows": rows, "perform_footprint": perform, "bench_stack_bytes": stack });
+        let doc = serde_json::json!({
+            "rows": rows,
+            "perform_footprint": perform,
+            "perform_stack_bytes": perform_stack,
+            "bench_stack_bytes": stack,
+        });
         println!("{}", serde_json::to_string_pretty(&doc)?);
     } else {
         println!(
@@ -26,13 +36,16 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
              instructions, not cycles.\n"
         );
         print!("{}", icount::table(&rows));
+        let show = |s: Option<u32>| s.map_or("?".into(), |s| s.to_string());
         println!(
             "\nperform firmware: {} B flash (text + rodata + vectors), {} B data, {} B bss; \
+             deepest stack {} B over {PERFORM_FRAMES} frames of the bundled recording; \
              deepest stack in the bench: {} B",
             perform.text,
             perform.data,
             perform.bss,
-            stack.map_or("?".into(), |s| s.to_string())
+            show(perform_stack),
+            show(stack)
         );
     }
     Ok(())
