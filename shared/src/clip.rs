@@ -205,9 +205,10 @@ impl<'a> Clips<'a> {
         for (d, &p) in m.params.iter_mut().zip(q.params()) {
             *d = p;
         }
+        let window = q.window();
         for (k, slot) in m.durations.iter_mut().enumerate().take(self.phases) {
             let mut acc = 0.0f32;
-            for (&index, &w) in q.window().iter().zip(q.weights()) {
+            for (&index, &w) in window.indices().iter().zip(window.weights()) {
                 let d = durations
                     .duration(index as usize, k)
                     .ok_or(ClipError::Duration)?;

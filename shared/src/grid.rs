@@ -25,11 +25,13 @@
 //! # Query: coefficients once, then every segment
 //!
 //! [`Grid::query`] finds the cell by one multiplication by the precomputed
-//! `1/step` per axis (no search) and computes, once, everything that does not
-//! depend on the segment: the indices of the window samples, the per-axis
-//! interpolation coefficients (with the fast-slerp polynomial already folded,
-//! see [`SlerpWeight`]) and the tensor-product position weights. [`Query::pose`]
-//! then applies them to every segment; [`Query::segment`] does one segment.
+//! `1/step` per axis (no search) and records, per axis, the window samples,
+//! their position weights and the in-cell coordinate: a small [`Query`],
+//! cheap to return by value. [`Query::pose`] then computes, once per call,
+//! everything that does not depend on the segment (the sample indices of the
+//! window, the tensor-product position weights and the per-axis slerp
+//! coefficients with the fast-slerp polynomial folded, see [`SlerpWeight`])
+//! and applies it to every segment; [`Query::segment`] does one segment.
 //!
 //! # The interpolation tree
 //!
@@ -42,6 +44,14 @@
 //! products of the per-axis weights (identical in exact arithmetic, fewer
 //! operations); at grid points the weights are exactly 0 and 1, so samples
 //! come back bit for bit.
+//!
+//! The W&H hand grid, three linear axes, has its own unrolled tree: its
+//! slerps skip the normalization step of the fast slerp
+//! ([`SlerpWeight::blend_lanes`]; a blend is unit to within 4e-6 already)
+//! and only the root is normalized, by the same Newton step
+//! ([`math::renormalize_lanes`]). That saves a fifth of the tree's
+//! operations; against the exact `f64` tree the rotation error stays below
+//! 1e-5 rad (`tests/synth.rs` measures it). Other grids normalize every slerp.
 //!
 //! A [`Interp::CatmullRom`] axis uses the 4 samples `k−1, k, k+1, k+2` around
 //! cell `k` (so the window is 4 wide along that axis) and interpolates
@@ -224,6 +234,11 @@ pub trait Samples {
     fn sample_count(&self) -> usize;
     /// Position and rotation of `segment` in sample `index`.
     fn sample(&self, index: usize, segment: usize) -> Option<(Vec3, Quat)>;
+    /// A speed hint: whether [`Samples::sample`] decodes (costs much more
+    /// than a few loads). The grid then reads a segment's whole window
+    /// before interpolating rather than each pair as it blends it; the
+    /// operations, and so the results, are the same either way.
+    const DECODES: bool = false;
 }
 
 /// In-memory samples: `[sample][segment]` slices (host, tests).
@@ -324,27 +339,6 @@ impl Cubic {
         }
     }
 
-    /// Catmull-Rom position weights for `P−1, P0, P1, P2`, phantoms folded in.
-    fn position_weights(&self) -> [f32; 4] {
-        let s = self.s.t();
-        let (s2, s3) = (s * s, s * s * s);
-        let mut w = [
-            0.5 * (-s3 + 2.0 * s2 - s),
-            0.5 * (3.0 * s3 - 5.0 * s2 + 2.0),
-            0.5 * (-3.0 * s3 + 4.0 * s2 + s),
-            0.5 * (s3 - s2),
-        ];
-        if self.lo_phantom {
-            // P−1 = 2·P0 − P1
-            w = [0.0, w[1] + 2.0 * w[0], w[2] - w[0], w[3]];
-        }
-        if self.hi_phantom {
-            // P2 = 2·P1 − P0
-            w = [w[0], w[1] - w[3], w[2] + 2.0 * w[3], 0.0];
-        }
-        w
-    }
-
     /// Spherical Catmull-Rom of four rotations (exact endpoints), on
     /// `[x, y, z, w]` components of any lane type (same bits per lane).
     #[inline]
@@ -375,17 +369,151 @@ impl Cubic {
     }
 }
 
-/// A located query: window sample indices and coefficients, computed once
-/// and applied to every segment (see the module doc).
+/// Catmull-Rom position weights for `P−1, P0, P1, P2` at `s`, phantoms
+/// folded in.
+fn cubic_position_weights(s: f32, lo_phantom: bool, hi_phantom: bool) -> [f32; 4] {
+    let (s2, s3) = (s * s, s * s * s);
+    let mut w = [
+        0.5 * (-s3 + 2.0 * s2 - s),
+        0.5 * (3.0 * s3 - 5.0 * s2 + 2.0),
+        0.5 * (-3.0 * s3 + 4.0 * s2 + s),
+        0.5 * (s3 - s2),
+    ];
+    if lo_phantom {
+        // P−1 = 2·P0 − P1
+        w = [0.0, w[1] + 2.0 * w[0], w[2] - w[0], w[3]];
+    }
+    if hi_phantom {
+        // P2 = 2·P1 − P0
+        w = [w[0], w[1] - w[3], w[2] + 2.0 * w[3], 0.0];
+    }
+    w
+}
+
+/// How one axis of a located query interpolates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Shape {
+    /// Two samples: lerp / slerp.
+    Linear,
+    /// Four samples: Catmull-Rom, with `P−1` / `P2` replaced by linear
+    /// phantoms where the flags say so.
+    Cubic { lo_phantom: bool, hi_phantom: bool },
+}
+
+/// One axis of a located query.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct AxisQuery {
+    /// The window samples along the axis, in window order, as sample-index
+    /// offsets (index along the axis times the axis' sample stride).
+    offset: [u32; 4],
+    /// Position weights of those samples.
+    weight: [f32; 4],
+    /// Position inside the cell, `[0, 1]`.
+    t: f32,
+    shape: Shape,
+}
+
+impl AxisQuery {
+    /// The filler of unused axis slots.
+    const UNUSED: Self = Self {
+        offset: [0; 4],
+        weight: [1.0, 0.0, 0.0, 0.0],
+        t: 0.0,
+        shape: Shape::Linear,
+    };
+
+    /// Samples along the axis in the window (2 linear, 4 Catmull-Rom).
+    fn width(&self) -> usize {
+        match self.shape {
+            Shape::Linear => 2,
+            Shape::Cubic { .. } => 4,
+        }
+    }
+
+    /// The rotation coefficients (polynomials folded, see [`SlerpWeight`]).
+    fn rotation_weights(&self) -> AxisWeights {
+        match self.shape {
+            Shape::Linear => AxisWeights::Linear(SlerpWeight::new(self.t)),
+            Shape::Cubic {
+                lo_phantom,
+                hi_phantom,
+            } => AxisWeights::Cubic(Cubic::new(self.t, lo_phantom, hi_phantom)),
+        }
+    }
+}
+
+/// A located query: per axis, the window samples, their position weights
+/// and the in-cell coordinate (see the module doc). It is small (cheap to
+/// return and copy); [`Query::pose`] derives the coefficients it applies to
+/// every segment once per call.
 #[derive(Clone, Copy, Debug)]
 pub struct Query {
-    window: [u32; MAX_WINDOW],
-    weights: [f32; MAX_WINDOW],
-    len: usize,
-    axes: [AxisWeights; MAX_AXES],
+    axes: [AxisQuery; MAX_AXES],
     axis_count: usize,
     params: [f32; MAX_AXES],
     adjust: Adjust,
+}
+
+/// The window of a query: the indices of its samples (axis 0 fastest) and
+/// their position weights (the tensor product of the axis weights).
+#[derive(Clone, Copy, Debug)]
+pub struct Window {
+    index: [u32; MAX_WINDOW],
+    weight: [f32; MAX_WINDOW],
+    len: usize,
+}
+
+impl Window {
+    /// The tensor expansion of `axes` (axis 0 fastest).
+    fn of(axes: &[AxisQuery]) -> Self {
+        let mut w = Window {
+            index: [0; MAX_WINDOW],
+            weight: [0.0; MAX_WINDOW],
+            len: 1,
+        };
+        if let Some(first) = w.weight.first_mut() {
+            *first = 1.0;
+        }
+        for axis in axes {
+            w.expand(axis);
+        }
+        w
+    }
+
+    /// Expands the window by one axis: every existing entry is repeated for
+    /// each of the axis' samples (the new axis varies slowest).
+    fn expand(&mut self, axis: &AxisQuery) {
+        let old = self.len;
+        let width = axis.width();
+        self.len = old.saturating_mul(width).min(MAX_WINDOW);
+        // Fill from the back so the old entries are read before being overwritten.
+        let along = axis.offset.iter().zip(&axis.weight).take(width);
+        for (digit, (&offset, &aw)) in along.enumerate().rev() {
+            for base in (0..old).rev() {
+                let j = digit * old + base;
+                let (bi, bw) = (
+                    self.index.get(base).copied().unwrap_or(0),
+                    self.weight.get(base).copied().unwrap_or(0.0),
+                );
+                if let (Some(wi), Some(ww)) = (self.index.get_mut(j), self.weight.get_mut(j)) {
+                    *wi = bi.wrapping_add(offset);
+                    *ww = bw * aw;
+                }
+            }
+        }
+    }
+
+    /// Sample indices of the window (axis 0 fastest).
+    #[must_use]
+    pub fn indices(&self) -> &[u32] {
+        self.index.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Position weight of each window sample.
+    #[must_use]
+    pub fn weights(&self) -> &[f32] {
+        self.weight.get(..self.len).unwrap_or(&[])
+    }
 }
 
 /// Where a query landed along one axis.
@@ -577,12 +705,9 @@ impl<'a> Grid<'a> {
     }
 
     fn build_query(&self, loc: &[Located; MAX_AXES], adjust: Adjust, q: &mut Query) {
-        q.len = 1;
-        q.window[0] = 0;
-        q.weights[0] = 1.0;
         q.axis_count = self.axis_count;
         q.adjust = adjust;
-        for (a, (((axis, l), aw), param)) in self
+        for (a, (((axis, l), aq), param)) in self
             .axes()
             .iter()
             .zip(loc)
@@ -590,30 +715,20 @@ impl<'a> Grid<'a> {
             .zip(&mut q.params)
             .enumerate()
         {
-            let (idx, w, weights) = self.axis_window(a, loc, axis, l);
-            *aw = weights;
+            *aq = self.axis_window(a, loc, axis, l);
             *param = axis_param(axis, l);
-            let stride = self.sample_stride.get(a).copied().unwrap_or(0);
-            expand(
-                &mut q.window,
-                &mut q.weights,
-                &mut q.len,
-                idx.get(..axis.window()).unwrap_or(&[]),
-                &w,
-                stride,
-            );
         }
     }
 
-    /// Sample indices along axis `a` (window order), position weights and
-    /// rotation coefficients.
+    /// Window samples along axis `a` (window order, as index offsets),
+    /// their position weights and the interpolation shape.
     fn axis_window(
         &self,
         a: usize,
         loc: &[Located; MAX_AXES],
         axis: &Axis,
         l: &Located,
-    ) -> ([u32; 4], [f32; 4], AxisWeights) {
+    ) -> AxisQuery {
         let n = axis.count;
         let k = l.cell;
         let cyclic = matches!(axis.kind, AxisKind::Cyclic { .. });
@@ -624,15 +739,13 @@ impl<'a> Grid<'a> {
                 i + 1
             }
         };
-        match axis.interp {
-            Interp::Linear => {
-                let w = SlerpWeight::new(l.t);
-                (
-                    [k, next(k), 0, 0],
-                    [1.0 - w.t(), w.t(), 0.0, 0.0],
-                    AxisWeights::Linear(w),
-                )
-            }
+        let stride = self.sample_stride.get(a).copied().unwrap_or(0);
+        let (idx, weight, shape) = match axis.interp {
+            Interp::Linear => (
+                [k, next(k), 0, 0],
+                [1.0 - l.t, l.t, 0.0, 0.0],
+                Shape::Linear,
+            ),
             Interp::CatmullRom => {
                 let k1 = next(k);
                 let (has_lo, has_hi) = (cyclic || k > 0, cyclic || k + 2 < n);
@@ -644,13 +757,21 @@ impl<'a> Grid<'a> {
                     k
                 };
                 let k2 = if hi_ok { next(k1) } else { k1 };
-                let c = Cubic::new(l.t, !lo_ok, !hi_ok);
                 (
                     [km1, k, k1, k2],
-                    c.position_weights(),
-                    AxisWeights::Cubic(c),
+                    cubic_position_weights(l.t, !lo_ok, !hi_ok),
+                    Shape::Cubic {
+                        lo_phantom: !lo_ok,
+                        hi_phantom: !hi_ok,
+                    },
                 )
             }
+        };
+        AxisQuery {
+            offset: idx.map(|i| i.wrapping_mul(stride)),
+            weight,
+            t: l.t,
+            shape,
         }
     }
 
@@ -769,44 +890,12 @@ fn axis_param(axis: &Axis, l: &Located) -> f32 {
     }
 }
 
-/// Tensor-expands the window by one axis: every existing entry is repeated
-/// for each of the axis' samples (the new axis varies slowest).
-fn expand(
-    window: &mut [u32; MAX_WINDOW],
-    weights: &mut [f32; MAX_WINDOW],
-    len: &mut usize,
-    idx: &[u32],
-    w: &[f32; 4],
-    stride: u32,
-) {
-    let old = *len;
-    let new = old.saturating_mul(idx.len()).min(MAX_WINDOW);
-    // Fill from the back so the old entries are read before being overwritten.
-    for (digit, (&ai, &aw)) in idx.iter().zip(w).enumerate().rev() {
-        for base in (0..old).rev() {
-            let j = digit * old + base;
-            let (bi, bw) = (
-                window.get(base).copied().unwrap_or(0),
-                weights.get(base).copied().unwrap_or(0.0),
-            );
-            if let (Some(wi), Some(ww)) = (window.get_mut(j), weights.get_mut(j)) {
-                *wi = bi.wrapping_add(ai.wrapping_mul(stride));
-                *ww = bw * aw;
-            }
-        }
-    }
-    *len = new;
-}
-
 impl Default for Query {
     /// An empty query (window of one sample 0, no axes); fill it with
     /// [`Grid::query_into`].
     fn default() -> Self {
         Query {
-            window: [0; MAX_WINDOW],
-            weights: [0.0; MAX_WINDOW],
-            len: 0,
-            axes: [AxisWeights::Linear(SlerpWeight::START); MAX_AXES],
+            axes: [AxisQuery::UNUSED; MAX_AXES],
             axis_count: 0,
             params: [0.0; MAX_AXES],
             adjust: Adjust::None,
@@ -827,34 +916,29 @@ impl Query {
         self.params.get(..self.axis_count).unwrap_or(&[])
     }
 
-    /// Sample indices of the window (axis 0 fastest).
+    /// The window: sample indices (axis 0 fastest) and the position weight
+    /// of each (tensor product of the axis weights).
     #[must_use]
-    pub fn window(&self) -> &[u32] {
-        self.window.get(..self.len).unwrap_or(&[])
+    pub fn window(&self) -> Window {
+        Window::of(self.used_axes())
     }
 
-    /// Position weight of each window sample (tensor product of the axis weights).
-    #[must_use]
-    pub fn weights(&self) -> &[f32] {
-        self.weights.get(..self.len).unwrap_or(&[])
+    fn used_axes(&self) -> &[AxisQuery] {
+        self.axes.get(..self.axis_count).unwrap_or(&[])
     }
 
     /// Interpolates every segment of the samples into `out` (`out.count` is set
     /// to the source's segment count).
     ///
-    /// On targets with SIMD (the host) segments are processed in blocks (as
-    /// many as fit `MAX_WINDOW` window entries, 8 for a trilinear window)
-    /// level by level, rotations stored per component, and the slerps of
-    /// four segments run as [`math::F4`] lanes. On the Cortex-M (no SIMD)
-    /// each segment runs through the scalar path of [`Query::segment`] with a
-    /// window-sized buffer (an unrolled tree for three linear axes). Both
-    /// paths perform the same operations in the same order per segment, so
-    /// they give the same bits (tested).
-    ///
-    /// On the firmware keep one [`Query`] across frames and refill it with
-    /// [`Grid::query_into`]: building a fresh `Query` (as [`Grid::query`] and
-    /// [`Grid::synthesize`] do) costs a few thousand instructions of
-    /// initialization and copying.
+    /// Three linear axes (the W&H hand grid) take an unrolled 4 + 2 + 1 tree
+    /// of [`SlerpWeight::blend_lanes`] whose result is normalized once
+    /// ([`math::renormalize_lanes`]); other grids reduce the window axis by
+    /// axis with normalized slerps. On targets with SIMD (the host) segments
+    /// are processed several at a time, the slerps of four segments running
+    /// as [`math::F4`] lanes; on the Cortex-M (no SIMD) each segment runs
+    /// through the scalar path of [`Query::segment`]. Both perform the same
+    /// operations in the same order per segment, so they give the same bits
+    /// (tested).
     pub fn pose<S: Samples, const N: usize>(
         &self,
         samples: &S,
@@ -865,26 +949,294 @@ impl Query {
             return Err(GridError::Capacity);
         }
         out.count = n;
-        if !WIDE {
-            return self.pose_scalar(samples, out, n);
+        let positions = out.positions.get_mut(..n).unwrap_or(&mut []);
+        let rotations = out.rotations.get_mut(..n).unwrap_or(&mut []);
+        match self.trilinear() {
+            Some(tree) => tree.pose(samples, positions, rotations),
+            None => self.plan().pose(samples, positions, rotations),
         }
-        let block = MAX_WINDOW.checked_div(self.len).unwrap_or(1).max(1);
+    }
+
+    /// Interpolates one segment (the scalar path the Cortex-M uses for
+    /// every segment). Derives the coefficients on every call: for whole
+    /// poses use [`Query::pose`].
+    pub fn segment<S: Samples>(
+        &self,
+        samples: &S,
+        segment: usize,
+    ) -> Result<(Vec3, Quat), GridError> {
+        match self.trilinear() {
+            Some(tree) => tree.segment(samples, segment),
+            None => {
+                let mut out = (Vec3::ZERO, Quat::IDENTITY);
+                let slots = (
+                    core::slice::from_mut(&mut out.0),
+                    core::slice::from_mut(&mut out.1),
+                );
+                self.plan().scalar_any(samples, segment, slots)?;
+                Ok(out)
+            }
+        }
+    }
+
+    /// The unrolled tree of an all-linear three-axis query.
+    fn trilinear(&self) -> Option<Trilinear> {
+        match self.used_axes() {
+            [x, y, z] if [x, y, z].iter().all(|a| a.shape == Shape::Linear) => {
+                Some(Trilinear::new(x, y, z))
+            }
+            _ => None,
+        }
+    }
+
+    /// The window and rotation coefficients of the general tree.
+    fn plan(&self) -> Plan {
+        let mut axes = [AxisWeights::Linear(SlerpWeight::START); MAX_AXES];
+        for (w, a) in axes.iter_mut().zip(self.used_axes()) {
+            *w = a.rotation_weights();
+        }
+        Plan {
+            window: self.window(),
+            axes,
+            axis_count: self.axis_count,
+        }
+    }
+}
+
+/// The W&H hand grid, three linear axes: a 2×2×2 window and the tree
+/// `z(y(x(q0, q1), x(q2, q3)), y(x(q4, q5), x(q6, q7)))` of unnormalized
+/// blends, normalized once if any level blends.
+struct Trilinear {
+    index: [u32; 8],
+    weight: [f32; 8],
+    slerp: [SlerpWeight; 3],
+    blends: bool,
+}
+
+impl Trilinear {
+    fn new(x: &AxisQuery, y: &AxisQuery, z: &AxisQuery) -> Self {
+        let ([x0, x1, ..], [y0, y1, ..], [z0, z1, ..]) = (x.offset, y.offset, z.offset);
+        let ([u0, u1, ..], [v0, v1, ..], [w0, w1, ..]) = (x.weight, y.weight, z.weight);
+        // The same sums and products, in the same order, as `Window::of`.
+        let at = |a: u32, b: u32, c: u32| a.wrapping_add(b).wrapping_add(c);
+        let slerp = [x.t, y.t, z.t].map(SlerpWeight::new);
+        Self {
+            index: [
+                at(x0, y0, z0),
+                at(x1, y0, z0),
+                at(x0, y1, z0),
+                at(x1, y1, z0),
+                at(x0, y0, z1),
+                at(x1, y0, z1),
+                at(x0, y1, z1),
+                at(x1, y1, z1),
+            ],
+            weight: [
+                u0 * v0 * w0,
+                u1 * v0 * w0,
+                u0 * v1 * w0,
+                u1 * v1 * w0,
+                u0 * v0 * w1,
+                u1 * v0 * w1,
+                u0 * v1 * w1,
+                u1 * v1 * w1,
+            ],
+            blends: slerp.iter().any(SlerpWeight::is_blend),
+            slerp,
+        }
+    }
+
+    /// Every segment: groups of four as [`F4`] lanes where the target has
+    /// SIMD, the rest (all of them on the Cortex-M) one at a time.
+    fn pose<S: Samples>(
+        &self,
+        samples: &S,
+        positions: &mut [Vec3],
+        rotations: &mut [Quat],
+    ) -> Result<(), GridError> {
+        let mut done = 0;
+        if WIDE {
+            let quads = positions
+                .chunks_exact_mut(4)
+                .zip(rotations.chunks_exact_mut(4));
+            for (p, r) in quads {
+                self.four(samples, done, p, r)?;
+                done += 4;
+            }
+        }
+        let rest = positions.iter_mut().zip(rotations.iter_mut()).skip(done);
+        if self.slerp.iter().all(SlerpWeight::is_blend) {
+            for (seg, (p, r)) in rest.enumerate() {
+                (*p, *r) = self.segment_blend(samples, done + seg)?;
+            }
+        } else {
+            for (seg, (p, r)) in rest.enumerate() {
+                (*p, *r) = self.segment(samples, done + seg)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// One segment when every level blends (a query inside a cell, the
+    /// usual case): the same operations as [`Trilinear::segment`] without
+    /// the endpoint checks. Samples that decode are all read first
+    /// ([`Samples::DECODES`]); others are blended pair by pair as they are
+    /// read.
+    #[inline(always)]
+    fn segment_blend<S: Samples>(
+        &self,
+        samples: &S,
+        segment: usize,
+    ) -> Result<(Vec3, Quat), GridError> {
+        let [x, y, z] = &self.slerp;
+        if S::DECODES {
+            let (p, [q0, q1, q2, q3, q4, q5, q6, q7]) = self.fetch(samples, segment)?;
+            let ab = y.blend(x.blend(q0, q1), x.blend(q2, q3));
+            let cd = y.blend(x.blend(q4, q5), x.blend(q6, q7));
+            let [rx, ry, rz, rw] = math::renormalize_lanes(z.blend(ab, cd));
+            return Ok((p, Quat::from_xyzw(rx, ry, rz, rw)));
+        }
+        let [i0, i1, i2, i3, i4, i5, i6, i7] = self.index;
+        let [w0, w1, w2, w3, w4, w5, w6, w7] = self.weight;
+        let get = |i: u32| {
+            let (p, q) = samples
+                .sample(i as usize, segment)
+                .ok_or(GridError::MissingSample)?;
+            Ok::<_, GridError>((p, [q.x, q.y, q.z, q.w]))
+        };
+        let ((p0, q0), (p1, q1)) = (get(i0)?, get(i1)?);
+        let mut p = p0 * w0 + p1 * w1;
+        let a = x.blend(q0, q1);
+        let ((p2, q2), (p3, q3)) = (get(i2)?, get(i3)?);
+        p = p + p2 * w2 + p3 * w3;
+        let ab = y.blend(a, x.blend(q2, q3));
+        let ((p4, q4), (p5, q5)) = (get(i4)?, get(i5)?);
+        p = p + p4 * w4 + p5 * w5;
+        let c = x.blend(q4, q5);
+        let ((p6, q6), (p7, q7)) = (get(i6)?, get(i7)?);
+        p = p + p6 * w6 + p7 * w7;
+        let cd = y.blend(c, x.blend(q6, q7));
+        let [rx, ry, rz, rw] = math::renormalize_lanes(z.blend(ab, cd));
+        Ok((p, Quat::from_xyzw(rx, ry, rz, rw)))
+    }
+
+    /// One segment.
+    #[inline]
+    fn segment<S: Samples>(&self, samples: &S, segment: usize) -> Result<(Vec3, Quat), GridError> {
+        let (p, q) = self.fetch(samples, segment)?;
+        let [x, y, z, w] = self.tree(q);
+        Ok((p, Quat::from_xyzw(x, y, z, w)))
+    }
+
+    /// Segments `first..first + 4` as four lanes.
+    fn four<S: Samples>(
+        &self,
+        samples: &S,
+        first: usize,
+        positions: &mut [Vec3],
+        rotations: &mut [Quat],
+    ) -> Result<(), GridError> {
+        let mut lanes = [[[0.0f32; 4]; 4]; 8];
+        for (lane, p) in positions.iter_mut().enumerate() {
+            let (pos, q) = self.fetch(samples, first + lane)?;
+            *p = pos;
+            for (dst, src) in lanes.iter_mut().zip(q) {
+                for (c, v) in dst.iter_mut().zip(src) {
+                    if let Some(slot) = c.get_mut(lane) {
+                        *slot = v;
+                    }
+                }
+            }
+        }
+        let [x, y, z, w] = self.tree(lanes.map(|q| q.map(F4)));
+        for (lane, r) in rotations.iter_mut().enumerate() {
+            let at = |c: F4| c.0.get(lane).copied().unwrap_or(0.0);
+            *r = Quat::from_xyzw(at(x), at(y), at(z), at(w));
+        }
+        Ok(())
+    }
+
+    /// The window of one segment: the weighted sum of its positions (in
+    /// window order) and its rotations as `[x, y, z, w]`.
+    #[inline(always)]
+    fn fetch<S: Samples>(
+        &self,
+        samples: &S,
+        segment: usize,
+    ) -> Result<(Vec3, [[f32; 4]; 8]), GridError> {
+        let mut q = [[0.0; 4]; 8];
+        let mut p = Vec3::ZERO;
+        let window = self.index.iter().zip(&self.weight).zip(&mut q);
+        for (j, ((&index, &w), slot)) in window.enumerate() {
+            let (sp, sq) = samples
+                .sample(index as usize, segment)
+                .ok_or(GridError::MissingSample)?;
+            p = if j == 0 { sp * w } else { p + sp * w };
+            *slot = [sq.x, sq.y, sq.z, sq.w];
+        }
+        Ok((p, q))
+    }
+
+    /// The rotation tree on any lane type.
+    #[inline(always)]
+    fn tree<T: Lane>(&self, q: [[T; 4]; 8]) -> [T; 4] {
+        let [q0, q1, q2, q3, q4, q5, q6, q7] = q;
+        let [x, y, z] = &self.slerp;
+        let ab = y.blend_lanes(x.blend_lanes(q0, q1), x.blend_lanes(q2, q3));
+        let cd = y.blend_lanes(x.blend_lanes(q4, q5), x.blend_lanes(q6, q7));
+        let r = z.blend_lanes(ab, cd);
+        if self.blends {
+            math::renormalize_lanes(r)
+        } else {
+            r
+        }
+    }
+}
+
+/// The general tree of a query: its window and every axis' rotation
+/// coefficients, reduced axis by axis with normalized slerps.
+struct Plan {
+    window: Window,
+    axes: [AxisWeights; MAX_AXES],
+    axis_count: usize,
+}
+
+impl Plan {
+    fn window(&self) -> &[u32] {
+        self.window.indices()
+    }
+
+    fn weights(&self) -> &[f32] {
+        self.window.weights()
+    }
+
+    fn axes(&self) -> &[AxisWeights] {
+        self.axes.get(..self.axis_count).unwrap_or(&[])
+    }
+
+    /// Every segment: in blocks with [`F4`] lanes where the target has
+    /// SIMD, else one at a time.
+    fn pose<S: Samples>(
+        &self,
+        samples: &S,
+        positions: &mut [Vec3],
+        rotations: &mut [Quat],
+    ) -> Result<(), GridError> {
+        if !WIDE {
+            return self.scalar_any(samples, 0, (positions, rotations));
+        }
+        let n = positions.len();
+        let block = MAX_WINDOW.checked_div(self.window.len).unwrap_or(1).max(1);
         let mut buf = Soa::new();
         let mut first = 0;
         while first < n {
             let count = block.min(n - first);
-            let positions = out
-                .positions
-                .get_mut(first..first + count)
-                .unwrap_or(&mut []);
-            self.fetch(samples, first, block, positions, &mut buf)?;
+            let p = positions.get_mut(first..first + count).unwrap_or(&mut []);
+            self.fetch(samples, first, block, p, &mut buf)?;
             self.reduce(&mut buf, block, count);
-            let rotations = out
-                .rotations
-                .get_mut(first..first + count)
-                .unwrap_or(&mut []);
+            let r = rotations.get_mut(first..first + count).unwrap_or(&mut []);
             let [cx, cy, cz, cw] = &buf.0;
-            for ((((r, &x), &y), &z), &w) in rotations.iter_mut().zip(cx).zip(cy).zip(cz).zip(cw) {
+            for ((((r, &x), &y), &z), &w) in r.iter_mut().zip(cx).zip(cy).zip(cz).zip(cw) {
                 *r = Quat::from_xyzw(x, y, z, w);
             }
             first += count;
@@ -892,61 +1244,19 @@ impl Query {
         Ok(())
     }
 
-    /// Interpolates one segment (the scalar path the Cortex-M uses for
-    /// every segment).
-    pub fn segment<S: Samples>(
+    /// Segments `first..` through the scalar path with a window-sized buffer.
+    fn scalar_any<S: Samples>(
         &self,
         samples: &S,
-        segment: usize,
-    ) -> Result<(Vec3, Quat), GridError> {
-        let mut out = (Vec3::ZERO, Quat::IDENTITY);
-        let slots = (
-            core::slice::from_mut(&mut out.0),
-            core::slice::from_mut(&mut out.1),
-        );
-        match self.len {
-            0..=2 => self.scalar::<S, 2>(samples, segment, slots)?,
-            3..=4 => self.scalar::<S, 4>(samples, segment, slots)?,
-            5..=8 => self.scalar::<S, 8>(samples, segment, slots)?,
-            9..=16 => self.scalar::<S, 16>(samples, segment, slots)?,
-            _ => self.scalar::<S, MAX_WINDOW>(samples, segment, slots)?,
-        }
-        Ok(out)
-    }
-
-    /// All segments through the scalar path (no scratch beyond the window).
-    fn pose_scalar<S: Samples, const N: usize>(
-        &self,
-        samples: &S,
-        out: &mut Pose<N>,
-        n: usize,
+        first: usize,
+        out: (&mut [Vec3], &mut [Quat]),
     ) -> Result<(), GridError> {
-        let positions = out.positions.get_mut(..n).unwrap_or(&mut []);
-        let rotations = out.rotations.get_mut(..n).unwrap_or(&mut []);
-        let slots = (positions, rotations);
-        match self.len {
-            0..=2 => self.scalar::<S, 2>(samples, 0, slots),
-            3..=4 => self.scalar::<S, 4>(samples, 0, slots),
-            5..=8 => self.scalar::<S, 8>(samples, 0, slots),
-            9..=16 => self.scalar::<S, 16>(samples, 0, slots),
-            _ => self.scalar::<S, MAX_WINDOW>(samples, 0, slots),
-        }
-    }
-
-    /// The three slerp weights of an all-linear three-axis query.
-    #[inline]
-    fn linear3(&self) -> Option<[&SlerpWeight; 3]> {
-        match (self.axis_count, &self.axes) {
-            (
-                3,
-                [
-                    AxisWeights::Linear(x),
-                    AxisWeights::Linear(y),
-                    AxisWeights::Linear(z),
-                    ..,
-                ],
-            ) => Some([x, y, z]),
-            _ => None,
+        match self.window.len {
+            0..=2 => self.scalar::<S, 2>(samples, first, out),
+            3..=4 => self.scalar::<S, 4>(samples, first, out),
+            5..=8 => self.scalar::<S, 8>(samples, first, out),
+            9..=16 => self.scalar::<S, 16>(samples, first, out),
+            _ => self.scalar::<S, MAX_WINDOW>(samples, first, out),
         }
     }
 
@@ -970,25 +1280,14 @@ impl Query {
                 *slot = sq;
             }
             *p = acc;
-            *r = match (self.linear3(), buf.first_chunk::<8>()) {
-                // The W&H hand grid: an unrolled 4 + 2 + 1 tree (same
-                // operations in the same order as the loop below).
-                (Some([wx, wy, wz]), Some(&[q0, q1, q2, q3, q4, q5, q6, q7])) => {
-                    let (a, b) = (wx.apply(q0, q1), wx.apply(q2, q3));
-                    let (c, d) = (wx.apply(q4, q5), wx.apply(q6, q7));
-                    wz.apply(wy.apply(a, b), wy.apply(c, d))
-                }
-                _ => {
-                    let mut len = self.len;
-                    for axis in self.axes.iter().take(self.axis_count) {
-                        len = match axis {
-                            AxisWeights::Linear(w) => pairs_in_place(&mut buf, len, w),
-                            AxisWeights::Cubic(c) => quads_in_place(&mut buf, len, c),
-                        };
-                    }
-                    buf.first().copied().unwrap_or(Quat::IDENTITY)
-                }
-            };
+            let mut len = self.window.len;
+            for axis in self.axes() {
+                len = match axis {
+                    AxisWeights::Linear(w) => pairs_in_place(&mut buf, len, w),
+                    AxisWeights::Cubic(c) => quads_in_place(&mut buf, len, c),
+                };
+            }
+            *r = buf.first().copied().unwrap_or(Quat::IDENTITY);
         }
         Ok(())
     }
@@ -1035,8 +1334,8 @@ impl Query {
     /// the results end up in slots `0..count`.
     #[inline]
     fn reduce(&self, buf: &mut Soa, block: usize, count: usize) {
-        let mut len = self.len;
-        for axis in self.axes.iter().take(self.axis_count) {
+        let mut len = self.window.len;
+        for axis in self.axes() {
             len = match axis {
                 AxisWeights::Linear(w) => reduce_linear(buf, len, block, count, w),
                 AxisWeights::Cubic(c) => reduce_cubic(buf, len, block, count, c),
@@ -1322,12 +1621,12 @@ mod tests {
     fn locate_and_clamp() {
         let g = Grid::new(&[axis(1.0, 0.5, 5)], None).unwrap();
         let q = g.query(&[1.75]).unwrap();
-        assert_eq!(q.window(), &[1, 2]);
-        assert_eq!(q.weights(), &[0.5, 0.5]);
+        assert_eq!(q.window().indices(), &[1, 2]);
+        assert_eq!(q.window().weights(), &[0.5, 0.5]);
         assert_eq!(q.adjust(), Adjust::None);
         let q = g.query(&[3.0]).unwrap();
         assert_eq!(
-            (q.window(), q.weights()),
+            (q.window().indices(), q.window().weights()),
             (&[3u32, 4][..], &[0.0f32, 1.0][..])
         );
         let q = g.query(&[99.0]).unwrap();
@@ -1343,9 +1642,9 @@ mod tests {
         };
         let g = Grid::new(&[a], None).unwrap();
         let q = g.query(&[1.75]).unwrap();
-        assert_eq!(q.window(), &[3, 0]);
+        assert_eq!(q.window().indices(), &[3, 0]);
         let q = g.query(&[-0.25]).unwrap();
-        assert_eq!(q.window(), &[3, 0]);
+        assert_eq!(q.window().indices(), &[3, 0]);
         assert_eq!(q.adjust(), Adjust::None);
         assert!((q.params()[0] - 1.75).abs() < 1e-6);
     }

@@ -541,20 +541,25 @@ impl<'a> Table<'a> {
     }
 
     /// The 12 stored bytes of one segment sample.
+    #[inline(always)]
     #[must_use]
     pub fn raw_sample(&self, index: usize, segment: usize) -> Option<&'a [u8; SAMPLE_LEN]> {
-        if segment >= self.segment_count() {
+        let segments = self.segment_count();
+        if index >= self.shape.grid_samples || segment >= segments {
             return None;
         }
-        let slot = index
-            .checked_mul(self.segment_count())?
-            .checked_add(segment)?;
-        let from = slot.checked_mul(SAMPLE_LEN)?;
+        // In range, the offset is below `samples.len()` (checked by `parse`
+        // to be `grid_samples · segments · 12`), so it cannot wrap.
+        let from = index
+            .wrapping_mul(segments)
+            .wrapping_add(segment)
+            .wrapping_mul(SAMPLE_LEN);
         self.samples.get(from..)?.first_chunk::<SAMPLE_LEN>()
     }
 
     /// Decodes the position and rotation of `segment` at grid sample `index`
     /// (row-major, axis 0 fastest). `None` if either is out of range.
+    #[inline(always)]
     #[must_use]
     pub fn sample(&self, index: usize, segment: usize) -> Option<(Vec3, Quat)> {
         Some(quant::decode_sample(
@@ -611,6 +616,8 @@ fn grid_axes(axes: &[Axis]) -> ([grid::Axis; MAX_AXES], usize) {
 }
 
 impl Samples for Table<'_> {
+    const DECODES: bool = true;
+
     #[inline]
     fn segment_count(&self) -> usize {
         usize::from(self.header.segment_count)
@@ -621,7 +628,7 @@ impl Samples for Table<'_> {
         self.shape.grid_samples
     }
 
-    #[inline]
+    #[inline(always)]
     fn sample(&self, index: usize, segment: usize) -> Option<(Vec3, Quat)> {
         Table::sample(self, index, segment)
     }

@@ -154,7 +154,7 @@ fn encode_component(v: f32) -> u32 {
 }
 
 /// Value of one 15-bit component code (the low 15 bits of `field`).
-#[inline]
+#[inline(always)]
 fn decode_component(field: u32) -> f32 {
     // The field is masked to 15 bits, so it fits an i32 exactly.
     ((field & ROT_FIELD) as i32 - ROT_MID) as f32 * ROT_DEC
@@ -187,47 +187,75 @@ pub fn quantize_rotation(q: Quat) -> [u8; ROTATION_LEN] {
 }
 
 /// Decodes a "smallest three" rotation: the three stored components, the
-/// dropped one rebuilt as `√max(0, 1 − a² − b² − c²)` (as `x · rsqrt(x)`),
-/// then renormalized (one Newton step of `rsqrt`, exact for a norm of 1;
-/// [`math::normalize_quat`] for codes no writer produces). Bit 47 is ignored.
-/// Every bit pattern decodes to a unit quaternion.
+/// dropped one rebuilt as `√(1 − a² − b² − c²)` (as `x · rsqrt(x)`), then
+/// renormalized by one Newton step of `rsqrt` from 1 (exact for a norm of
+/// 1); codes no writer produces (`a² + b² + c² > 0.8`) take
+/// [`math::normalize_quat`] instead. Bit 47 is ignored. Every bit pattern
+/// decodes to a unit quaternion.
 #[must_use]
 pub fn dequantize_rotation(bytes: &[u8; ROTATION_LEN]) -> Quat {
     let [b0, b1, b2, b3, b4, b5] = *bytes;
     // The 48-bit word as two 32-bit halves (cheaper than u64 shifts on the M4F).
     let lo = u32::from_le_bytes([b0, b1, b2, b3]);
     let hi = u32::from(u16::from_le_bytes([b4, b5]));
+    rotation_from_words(lo, hi)
+}
+
+/// Smallest `1 − a² − b² − c²` decoded on the fast path. Written codes have
+/// at least `1/4` (the dropped component is the largest of four whose
+/// squares sum to 1) less rounding.
+const REST_MIN: f32 = 0.2;
+
+/// [`dequantize_rotation`] of the 48-bit word `lo | hi << 32`.
+#[inline(always)]
+fn rotation_from_words(lo: u32, hi: u32) -> Quat {
     let a = decode_component(lo >> 2);
     let b = decode_component(lo >> 17);
     let c = decode_component(hi);
-    let rest = 1.0 - (a * a + b * b + c * c);
+    let small = a * a + b * b + c * c;
+    let rest = 1.0 - small;
+    // One unsigned compare for REST_MIN ≤ rest < 1 (rest = 1 is exact below).
+    let fast = rest.to_bits().wrapping_sub(REST_MIN.to_bits())
+        < 1.0f32.to_bits().wrapping_sub(REST_MIN.to_bits());
+    if !fast {
+        return rotation_edge(lo & 3, [a, b, c], rest);
+    }
     // `rest · rsqrt(rest)` (≤ 2 ulp) instead of the correctly rounded
     // `math::sqrt`, whose `f64` rounding check is soft-float on the M4F; the
-    // renormalization below absorbs the difference. `rest = 1` (axis-aligned
-    // codes) stays exact.
-    let big = if rest >= 1.0 {
-        1.0
-    } else if rest > 0.0 {
-        rest * math::rsqrt(rest)
-    } else {
-        0.0
-    };
-    let [w, x, y, z] = match lo & 3 {
+    // renormalization absorbs the difference.
+    let big = rest * math::rsqrt_normal(rest);
+    // `|q|² = |s|² + big²` is 1 to a few ulp here, so one Newton step of
+    // `rsqrt` from 1, `(3 − |q|²)/2`, renormalizes to ~1e-13.
+    let f = 1.5 - 0.5 * (small + big * big);
+    place(lo & 3, big * f, [a * f, b * f, c * f])
+}
+
+/// The quaternion with the dropped component `big` at `index` (in
+/// `[w, x, y, z]` order) and the stored ones in order around it.
+#[inline(always)]
+fn place(index: u32, big: f32, [a, b, c]: [f32; 3]) -> Quat {
+    let [w, x, y, z] = match index {
         0 => [big, a, b, c],
         1 => [a, big, b, c],
         2 => [a, b, big, c],
         _ => [a, b, c, big],
     };
-    let q = Quat::from_xyzw(x, y, z, w);
-    if rest > 0.0 {
-        // `|q|² = |s|² + big²` is 1 to a few ulp here, so one Newton step of
-        // `rsqrt` from 1, `(3 − |q|²)/2`, renormalizes to ~1e-13 (and is exactly
-        // 1 when `|q|² = 1`, keeping axis-aligned codes exact).
-        q * (1.5 - 0.5 * math::quat_dot(q, q))
-    } else {
-        // Codes no writer produces (`|s| ≥ 1`): full normalization.
-        math::normalize_quat(q)
+    Quat::from_xyzw(x, y, z, w)
+}
+
+/// The codes off the fast path: `rest = 1` (axis-aligned, exact) and codes
+/// no writer produces (`rest < REST_MIN`, fully normalized).
+#[cold]
+fn rotation_edge(index: u32, s: [f32; 3], rest: f32) -> Quat {
+    if rest >= 1.0 {
+        return place(index, 1.0, s);
     }
+    let big = if rest > 0.0 {
+        rest * math::rsqrt(rest)
+    } else {
+        0.0
+    };
+    math::normalize_quat(place(index, big, s))
 }
 
 /// Quantizes one segment sample to its 12 bytes: position codes x, y, z as
@@ -243,17 +271,20 @@ pub fn encode_sample(position: Vec3, rotation: Quat, scale: f32) -> [u8; SAMPLE_
 }
 
 /// Decodes one 12-byte segment sample (see [`encode_sample`]).
+#[inline(always)]
 #[must_use]
 pub fn decode_sample(bytes: &[u8; SAMPLE_LEN], scale: f32) -> (Vec3, Quat) {
-    let [x0, x1, y0, y1, z0, z1, r0, r1, r2, r3, r4, r5] = *bytes;
-    let codes = [
-        i16::from_le_bytes([x0, x1]),
-        i16::from_le_bytes([y0, y1]),
-        i16::from_le_bytes([z0, z1]),
-    ];
+    // The sample as three little-endian words (aligned in a blob): x | y << 16,
+    // z | rotation bits 0–15 << 16, rotation bits 16–47.
+    let [w0 @ .., _, _, _, _, _, _, _, _] = bytes;
+    let [_, _, _, _, w1 @ .., _, _, _, _] = bytes;
+    let [_, _, _, _, _, _, _, _, w2 @ ..] = bytes;
+    let [w0, w1, w2] = [w0, w1, w2].map(|w| u32::from_le_bytes(*w));
+    // `as i16` keeps the low 16 bits: the two's-complement code.
+    let codes = [w0 as i16, (w0 >> 16) as i16, w1 as i16];
     (
         dequantize_position(codes, scale),
-        dequantize_rotation(&[r0, r1, r2, r3, r4, r5]),
+        rotation_from_words((w1 >> 16) | (w2 << 16), w2 >> 16),
     )
 }
 
