@@ -621,3 +621,15 @@ fn corrupted_tables_are_refused_at_boot_and_the_reason_reported() {
         println!("    {r}");
     }
 }
+
+#[test]
+fn a_rig_for_a_servo_back_end_the_board_lacks_is_refused() {
+    let rig16 = humanoid16();
+    let table = rest_table(&rig16);
+    let mut desc = rig16.desc();
+    desc.output = marionette_core::rig::Output::Pwm { freq_hz: 50 };
+    let mut buf = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
+    let n = desc.to_blob(&mut buf).unwrap();
+    let why = refused(&perform::region(&buf[..n], Some(&table)));
+    assert_eq!(why, StatusReason::Unsupported);
+}

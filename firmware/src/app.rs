@@ -10,6 +10,9 @@
 //! 2. every frame period of the board clock, calls [`Performer::tick`], which
 //!    eases the servos to rest after the fail-safe time-out or a disarm.
 //!
+//! A rig whose servo back-end the board cannot drive ([`Board::supports`])
+//! never arms: its `Status` reason is `Unsupported`.
+//!
 //! Without a valid rig in the table region there is nothing to drive: the
 //! app answers `Hello` and `RequestStatus` with a `Status` whose reason is
 //! `NoRig`, refuses every other command, and never writes the servo bus.
@@ -40,7 +43,14 @@ impl<B: Board> Cycles for BoardCycles<'_, B> {
 pub fn run<B: Board>(board: &mut B) -> Outcome {
     let region = Region::parse(board.tables());
     match Performer::new(&region) {
-        Some(mut performer) => perform(board, &mut performer),
+        Some(mut performer) => {
+            if let Some(rig) = &region.rig
+                && !board.supports(&rig.output())
+            {
+                performer.refuse(StatusReason::Unsupported);
+            }
+            perform(board, &mut performer)
+        }
         None => idle(board, region.reason),
     }
 }

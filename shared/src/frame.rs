@@ -278,6 +278,17 @@ impl<'r, 'a> Performer<'r, 'a> {
         })
     }
 
+    /// Marks the loop as unable to drive this rig on this board (for
+    /// example a servo back-end the board lacks): it disarms, refuses every
+    /// `Arm`, and reports `reason` in its [`Status`] (unless the tables
+    /// already gave a reason, which is reported first).
+    pub fn refuse(&mut self, reason: StatusReason) {
+        if self.reason == StatusReason::Ok {
+            self.reason = reason;
+        }
+        self.armed = false;
+    }
+
     /// The rig's frame period, µs: call [`Performer::tick`] this often.
     #[must_use]
     pub fn frame_period_us(&self) -> u32 {

@@ -229,6 +229,11 @@ impl Board for BlackPill {
         (&mut self.tracker, &mut self.servo)
     }
 
+    /// A Maestro at [`SERVO_BAUD`] (the rate USART2 is programmed for).
+    fn supports(&self, output: &marionette_core::rig::Output) -> bool {
+        matches!(output, marionette_core::rig::Output::Maestro { baud } if *baud == SERVO_BAUD)
+    }
+
     fn tables(&self) -> &'static [u8] {
         crate::region::tables()
     }
