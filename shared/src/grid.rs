@@ -234,6 +234,15 @@ pub trait Samples {
     fn sample_count(&self) -> usize;
     /// Position and rotation of `segment` in sample `index`.
     fn sample(&self, index: usize, segment: usize) -> Option<(Vec3, Quat)>;
+    /// Every segment of sample `index`, positions and rotations, where the
+    /// source holds them as slices in memory; `None` for sources that decode
+    /// (the default) or out of range. A speed path: the grid then reads a
+    /// run of segments without a call per sample; the values are those of
+    /// [`Samples::sample`].
+    fn row(&self, index: usize) -> Option<(&[Vec3], &[Quat])> {
+        let _ = index;
+        None
+    }
     /// A speed hint: whether [`Samples::sample`] decodes (costs much more
     /// than a few loads). The grid then reads a segment's whole window
     /// before interpolating rather than each pair as it blends it; the
@@ -288,6 +297,16 @@ impl Samples for SliceSamples<'_> {
             (Some(&p), Some(&q)) => Some((p, q)),
             _ => None,
         }
+    }
+
+    #[inline]
+    fn row(&self, index: usize) -> Option<(&[Vec3], &[Quat])> {
+        let from = index.checked_mul(self.segments)?;
+        let range = from..from.checked_add(self.segments)?;
+        Some((
+            self.positions.get(range.clone())?,
+            self.rotations.get(range)?,
+        ))
     }
 }
 
@@ -1046,32 +1065,25 @@ impl Trilinear {
         }
     }
 
-    /// Every segment: groups of four as [`F4`] lanes where the target has
-    /// SIMD, the rest (all of them on the Cortex-M) one at a time.
+    /// Every segment: in blocks level by level with [`F4`] lanes where the
+    /// target has SIMD, else one at a time.
     fn pose<S: Samples>(
         &self,
         samples: &S,
         positions: &mut [Vec3],
         rotations: &mut [Quat],
     ) -> Result<(), GridError> {
-        let mut done = 0;
         if WIDE {
-            let quads = positions
-                .chunks_exact_mut(4)
-                .zip(rotations.chunks_exact_mut(4));
-            for (p, r) in quads {
-                self.four(samples, done, p, r)?;
-                done += 4;
-            }
+            return self.pose_wide(samples, positions, rotations);
         }
-        let rest = positions.iter_mut().zip(rotations.iter_mut()).skip(done);
+        let all = positions.iter_mut().zip(rotations.iter_mut());
         if self.slerp.iter().all(SlerpWeight::is_blend) {
-            for (seg, (p, r)) in rest.enumerate() {
-                (*p, *r) = self.segment_blend(samples, done + seg)?;
+            for (seg, (p, r)) in all.enumerate() {
+                (*p, *r) = self.segment_blend(samples, seg)?;
             }
         } else {
-            for (seg, (p, r)) in rest.enumerate() {
-                (*p, *r) = self.segment(samples, done + seg)?;
+            for (seg, (p, r)) in all.enumerate() {
+                (*p, *r) = self.segment(samples, seg)?;
             }
         }
         Ok(())
@@ -1120,40 +1132,63 @@ impl Trilinear {
         Ok((p, Quat::from_xyzw(rx, ry, rz, rw)))
     }
 
+    /// The host path: blocks of `MAX_WINDOW / 8` segments, the same
+    /// operations as [`Trilinear::segment`] level by level on four segments
+    /// at a time.
+    fn pose_wide<S: Samples>(
+        &self,
+        samples: &S,
+        positions: &mut [Vec3],
+        rotations: &mut [Quat],
+    ) -> Result<(), GridError> {
+        const BLOCK: usize = MAX_WINDOW / 8;
+        let mut buf = Soa::new();
+        let blocks = positions.chunks_mut(BLOCK).zip(rotations.chunks_mut(BLOCK));
+        for (k, (p, r)) in blocks.enumerate() {
+            let count = p.len();
+            let window = (self.index.as_slice(), self.weight.as_slice());
+            fetch_block(samples, window, (k * BLOCK, BLOCK), p, &mut buf)?;
+            for lane in [0, 4] {
+                if lane < count {
+                    self.tree_lanes::<BLOCK>(&mut buf, lane);
+                }
+            }
+            buf.store(r);
+        }
+        Ok(())
+    }
+
+    /// The tree on slots `lane..lane + 4` of a scratch laid out
+    /// `[window][B]`, level by level in place; the results end up in slots
+    /// `lane..lane + 4`.
+    #[inline(always)]
+    fn tree_lanes<const B: usize>(&self, buf: &mut Soa, lane: usize) {
+        let mut len = 8;
+        for w in &self.slerp {
+            len /= 2;
+            for i in 0..len {
+                let (a, b) = (
+                    buf.get4((2 * i) * B + lane),
+                    buf.get4((2 * i + 1) * B + lane),
+                );
+                if let (Some(a), Some(b)) = (a, b) {
+                    buf.set4(i * B + lane, w.blend_lanes(a, b));
+                }
+            }
+        }
+        if self.blends
+            && let Some(r) = buf.get4(lane)
+        {
+            buf.set4(lane, math::renormalize_lanes(r));
+        }
+    }
+
     /// One segment.
     #[inline]
     fn segment<S: Samples>(&self, samples: &S, segment: usize) -> Result<(Vec3, Quat), GridError> {
         let (p, q) = self.fetch(samples, segment)?;
         let [x, y, z, w] = self.tree(q);
         Ok((p, Quat::from_xyzw(x, y, z, w)))
-    }
-
-    /// Segments `first..first + 4` as four lanes.
-    fn four<S: Samples>(
-        &self,
-        samples: &S,
-        first: usize,
-        positions: &mut [Vec3],
-        rotations: &mut [Quat],
-    ) -> Result<(), GridError> {
-        let mut lanes = [[[0.0f32; 4]; 4]; 8];
-        for (lane, p) in positions.iter_mut().enumerate() {
-            let (pos, q) = self.fetch(samples, first + lane)?;
-            *p = pos;
-            for (dst, src) in lanes.iter_mut().zip(q) {
-                for (c, v) in dst.iter_mut().zip(src) {
-                    if let Some(slot) = c.get_mut(lane) {
-                        *slot = v;
-                    }
-                }
-            }
-        }
-        let [x, y, z, w] = self.tree(lanes.map(|q| q.map(F4)));
-        for (lane, r) in rotations.iter_mut().enumerate() {
-            let at = |c: F4| c.0.get(lane).copied().unwrap_or(0.0);
-            *r = Quat::from_xyzw(at(x), at(y), at(z), at(w));
-        }
-        Ok(())
     }
 
     /// The window of one segment: the weighted sum of its positions (in
@@ -1232,13 +1267,16 @@ impl Plan {
         while first < n {
             let count = block.min(n - first);
             let p = positions.get_mut(first..first + count).unwrap_or(&mut []);
-            self.fetch(samples, first, block, p, &mut buf)?;
+            fetch_block(
+                samples,
+                (self.window(), self.weights()),
+                (first, block),
+                p,
+                &mut buf,
+            )?;
             self.reduce(&mut buf, block, count);
             let r = rotations.get_mut(first..first + count).unwrap_or(&mut []);
-            let [cx, cy, cz, cw] = &buf.0;
-            for ((((r, &x), &y), &z), &w) in r.iter_mut().zip(cx).zip(cy).zip(cz).zip(cw) {
-                *r = Quat::from_xyzw(x, y, z, w);
-            }
+            buf.store(r);
             first += count;
         }
         Ok(())
@@ -1271,15 +1309,14 @@ impl Plan {
     ) -> Result<(), GridError> {
         let mut buf = [Quat::IDENTITY; K];
         for (seg, (p, r)) in out.0.iter_mut().zip(out.1.iter_mut()).enumerate() {
-            let mut acc = Vec3::ZERO;
-            for ((slot, &index), &w) in buf.iter_mut().zip(self.window()).zip(self.weights()) {
+            let window = buf.iter_mut().zip(self.window()).zip(self.weights());
+            for (j, ((slot, &index), &w)) in window.enumerate() {
                 let (sp, sq) = samples
                     .sample(index as usize, first + seg)
                     .ok_or(GridError::MissingSample)?;
-                acc += sp * w;
+                *p = if j == 0 { sp * w } else { *p + sp * w };
                 *slot = sq;
             }
-            *p = acc;
             let mut len = self.window.len;
             for axis in self.axes() {
                 len = match axis {
@@ -1288,44 +1325,6 @@ impl Plan {
                 };
             }
             *r = buf.first().copied().unwrap_or(Quat::IDENTITY);
-        }
-        Ok(())
-    }
-
-    /// Reads the window of segments `first..first + positions.len()`:
-    /// positions as the weighted sum (in window order), rotations into slot
-    /// `j·block + b`. Window-major, so each window sample's segments are read
-    /// consecutively.
-    #[inline]
-    fn fetch<S: Samples>(
-        &self,
-        samples: &S,
-        first: usize,
-        block: usize,
-        positions: &mut [Vec3],
-        buf: &mut Soa,
-    ) -> Result<(), GridError> {
-        let count = positions.len();
-        positions.fill(Vec3::ZERO);
-        for (j, (&index, &w)) in self.window().iter().zip(self.weights()).enumerate() {
-            let [cx, cy, cz, cw] = &mut buf.0;
-            let range = j * block..j * block + count;
-            let (Some(sx), Some(sy), Some(sz), Some(sw)) = (
-                cx.get_mut(range.clone()),
-                cy.get_mut(range.clone()),
-                cz.get_mut(range.clone()),
-                cw.get_mut(range),
-            ) else {
-                return Err(GridError::MissingSample);
-            };
-            let rows = positions.iter_mut().zip(sx).zip(sy).zip(sz).zip(sw);
-            for (b, ((((pos, x), y), z), qw)) in rows.enumerate() {
-                let (p, q) = samples
-                    .sample(index as usize, first + b)
-                    .ok_or(GridError::MissingSample)?;
-                *pos += p * w;
-                (*x, *y, *z, *qw) = (q.x, q.y, q.z, q.w);
-            }
         }
         Ok(())
     }
@@ -1341,6 +1340,99 @@ impl Plan {
                 AxisWeights::Cubic(c) => reduce_cubic(buf, len, block, count, c),
             };
         }
+    }
+}
+
+/// Reads the window of segments `first..first + positions.len()`:
+/// positions as the weighted sum (in window order), rotations into slot
+/// `j·block + b` of the scratch. Window-major, so each window sample's
+/// segments are read consecutively.
+#[inline]
+fn fetch_block<S: Samples>(
+    samples: &S,
+    (window, weights): (&[u32], &[f32]),
+    (first, block): (usize, usize),
+    positions: &mut [Vec3],
+    buf: &mut Soa,
+) -> Result<(), GridError> {
+    let count = positions.len();
+    for (j, (&index, &w)) in window.iter().zip(weights).enumerate() {
+        let range = j * block..j * block + count;
+        let [cx, cy, cz, cw] = &mut buf.0;
+        let (Some(sx), Some(sy), Some(sz), Some(sw)) = (
+            cx.get_mut(range.clone()),
+            cy.get_mut(range.clone()),
+            cz.get_mut(range.clone()),
+            cw.get_mut(range),
+        ) else {
+            return Err(GridError::MissingSample);
+        };
+        if let Some((ps, qs)) = samples.row(index as usize) {
+            let run = first..first + count;
+            let (Some(ps), Some(qs)) = (ps.get(run.clone()), qs.get(run)) else {
+                return Err(GridError::MissingSample);
+            };
+            weigh(positions, ps, w, j == 0);
+            transpose(qs, [sx, sy, sz, sw]);
+            continue;
+        }
+        let rows = sx.iter_mut().zip(sy).zip(sz).zip(sw);
+        for (b, ((((x, y), z), qw), p)) in rows.zip(positions.iter_mut()).enumerate() {
+            let (sp, sq) = samples
+                .sample(index as usize, first + b)
+                .ok_or(GridError::MissingSample)?;
+            *p = if j == 0 { sp * w } else { *p + sp * w };
+            (*x, *y, *z, *qw) = (sq.x, sq.y, sq.z, sq.w);
+        }
+    }
+    Ok(())
+}
+
+/// `p = s·w` (`first`) or `p + s·w` for every pair: the same per-coordinate
+/// operations on four positions (12 floats) at a time where the target has
+/// SIMD.
+#[inline]
+fn weigh(positions: &mut [Vec3], samples: &[Vec3], w: f32, first: bool) {
+    let flat = |v: &[Vec3; 4]| {
+        let [a, b, c, d] = *v;
+        [
+            F4([a.x, a.y, a.z, b.x]),
+            F4([b.y, b.z, c.x, c.y]),
+            F4([c.z, d.x, d.y, d.z]),
+        ]
+    };
+    let wide = if WIDE { positions.len() / 4 * 4 } else { 0 };
+    let (head, tail) = positions.split_at_mut(wide);
+    let quads = head.chunks_exact_mut(4).zip(samples.chunks_exact(4));
+    for (p, s) in quads {
+        if let (Some(p), Some(s)) = (p.first_chunk_mut::<4>(), s.first_chunk::<4>()) {
+            let [s0, s1, s2] = flat(s).map(|v| v * F4::splat(w));
+            let [x0, x1, x2] = if first {
+                [s0, s1, s2]
+            } else {
+                let [p0, p1, p2] = flat(p);
+                [p0 + s0, p1 + s1, p2 + s2]
+            };
+            let ([a0, a1, a2, b0], [b1, b2, c0, c1], [c2, d0, d1, d2]) = (x0.0, x1.0, x2.0);
+            *p = [
+                Vec3::new(a0, a1, a2),
+                Vec3::new(b0, b1, b2),
+                Vec3::new(c0, c1, c2),
+                Vec3::new(d0, d1, d2),
+            ];
+        }
+    }
+    for (p, &s) in tail.iter_mut().zip(samples.iter().skip(wide)) {
+        *p = if first { s * w } else { *p + s * w };
+    }
+}
+
+/// Rotations into per-component rows (`[x, y, z, w]`).
+#[inline]
+fn transpose(rotations: &[Quat], [rx, ry, rz, rw]: [&mut [f32]; 4]) {
+    let rows = rx.iter_mut().zip(ry).zip(rz).zip(rw);
+    for ((((x, y), z), w), q) in rows.zip(rotations) {
+        (*x, *y, *z, *w) = (q.x, q.y, q.z, q.w);
     }
 }
 
@@ -1401,6 +1493,15 @@ impl Soa {
             if let Some(slot) = c.get_mut(i) {
                 *slot = v;
             }
+        }
+    }
+
+    /// Slots `0..out.len()` as quaternions.
+    #[inline]
+    fn store(&self, out: &mut [Quat]) {
+        let [cx, cy, cz, cw] = &self.0;
+        for ((((r, &x), &y), &z), &w) in out.iter_mut().zip(cx).zip(cy).zip(cz).zip(cw) {
+            *r = Quat::from_xyzw(x, y, z, w);
         }
     }
 
