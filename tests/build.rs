@@ -15,20 +15,8 @@ use std::path::{Path, PathBuf};
 
 use marionette_core::table::Table;
 use marionette_host::build::{self, Progress, measure, query, spec};
+use marionette_tests::synth_ref::Rng;
 use serde_json::json;
-
-/// A deterministic generator in `[0, 1)` (64-bit LCG).
-struct Lcg(u64);
-
-impl Lcg {
-    fn unit(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// The closed-form field: three segments, positions affine in the
 /// parameters, rotations about fixed axes by angles affine in them.
@@ -90,7 +78,7 @@ fn load_and_build(path: &Path) -> (build::Dataset, build::Built, spec::Spec) {
 #[test]
 fn scattered_affine_field_is_reproduced_and_the_mask_follows_the_distance_rule() {
     let dir = tempfile::tempdir().unwrap();
-    let mut rng = Lcg(7);
+    let mut rng = Rng::new(7);
     // 150 examples in x ∈ [0, 0.55], y, z ∈ [0, 1]: the grid's x axis runs
     // to 1, so the cells with x ∈ [2/3, 1] are beyond the data.
     let examples: Vec<_> = (0..150)

@@ -35,30 +35,9 @@ use marionette_core::wire::{
 use marionette_host::perform;
 use marionette_host::qemu::{self, Config, Emulator};
 use marionette_tests::puppet::{self, Limits, humanoid16, rest_table, rig_blob};
+use marionette_tests::synth_ref::Rng;
 use std::io::Write;
 use std::time::Duration;
-
-/// A small deterministic generator for the faults (inputs, not results).
-struct Lcg(u64);
-
-impl Lcg {
-    fn next(&mut self) -> u32 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 33) as u32
-    }
-
-    /// Uniform in `0..n`.
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() as usize) % n.max(1)
-    }
-
-    fn byte(&mut self) -> u8 {
-        (self.next() >> 8) as u8
-    }
-}
 
 /// One step of a script.
 enum Part {
@@ -357,7 +336,7 @@ fn eases_to_rest(outputs: &[Vec<u16>], limits: &[Limits]) -> Result<(), String> 
 #[test]
 fn random_noise_at_full_rate_is_rejected_and_counted() {
     let mut s = Script::start();
-    let mut rng = Lcg(1);
+    let mut rng = Rng::new(1);
     for i in 0..1000 {
         let len = if i % 250 == 125 { 4096 } else { rng.below(49) };
         let noise: Vec<u8> = (0..len).map(|_| rng.byte()).collect();
@@ -376,10 +355,10 @@ fn random_noise_at_full_rate_is_rejected_and_counted() {
 #[test]
 fn truncated_frames_are_rejected_and_counted() {
     let mut s = Script::start();
-    let mut rng = Lcg(2);
+    let mut rng = Rng::new(2);
     for i in 0..1000 {
         if i % 5 == 4 {
-            let cut = rng.next() as usize;
+            let cut = rng.next_u64() as usize;
             s.damaged_frame(|b| b.truncate(1 + cut % (b.len() - 1)));
         } else {
             s.frames(1);
@@ -392,11 +371,11 @@ fn truncated_frames_are_rejected_and_counted() {
 #[test]
 fn flipped_bits_are_rejected_and_counted() {
     let mut s = Script::start();
-    let mut rng = Lcg(3);
+    let mut rng = Rng::new(3);
     for i in 0..1000 {
         if i % 5 == 4 {
             let flips = 1 + rng.below(3);
-            let picks: Vec<u32> = (0..8).map(|_| rng.next()).collect();
+            let picks: Vec<u64> = (0..8).map(|_| rng.next_u64()).collect();
             s.damaged_frame(|b| flip_bits(b, flips, &picks));
         } else {
             s.frames(1);
@@ -408,7 +387,7 @@ fn flipped_bits_are_rejected_and_counted() {
 
 /// Flips `n` distinct bits of `body`, chosen by `picks`, skipping any flip
 /// that would make a byte `0x00` (that would split the frame in two).
-fn flip_bits(body: &mut [u8], n: usize, picks: &[u32]) {
+fn flip_bits(body: &mut [u8], n: usize, picks: &[u64]) {
     let bits = body.len() * 8;
     let mut done: Vec<usize> = Vec::new();
     for &p in picks {
@@ -429,7 +408,7 @@ fn flip_bits(body: &mut [u8], n: usize, picks: &[u32]) {
 #[test]
 fn oversized_frames_are_rejected_and_counted() {
     let mut s = Script::start();
-    let mut rng = Lcg(4);
+    let mut rng = Rng::new(4);
     for i in 0..600 {
         if i % 10 == 9 {
             let len = FRAME_CAPACITY + 1 + rng.below(3 * FRAME_CAPACITY);
@@ -560,7 +539,7 @@ fn refused(region: &[u8]) -> StatusReason {
 fn corrupted_tables_are_refused_at_boot_and_the_reason_reported() {
     let rig16 = humanoid16();
     let (rig, table) = (rig_blob(&rig16, None), rest_table(&rig16));
-    let mut rng = Lcg(5);
+    let mut rng = Rng::new(5);
     let mut rows = Vec::new();
     // Bit flips anywhere in the table blob.
     for _ in 0..6 {
@@ -596,6 +575,16 @@ fn corrupted_tables_are_refused_at_boot_and_the_reason_reported() {
             table.len()
         ));
     }
+    // Erased flash where the table should be: no table, not a damaged one.
+    let why = refused(&perform::region(&rig, Some(&[0xFF; 64])));
+    assert_eq!(why, StatusReason::NoTable);
+    rows.push(format!("erased (FF) table slot: {why:?}"));
+    // A flipped bit in the magic.
+    let mut t = table.clone();
+    t[0] ^= 0x01;
+    let why = refused(&perform::region(&rig, Some(&t)));
+    assert_eq!(why, StatusReason::BadMagic);
+    rows.push(format!("magic bit flipped: {why:?}"));
     // A wrong format version with a correct CRC.
     let mut t = table.clone();
     t[4] = 2;
@@ -613,7 +602,7 @@ fn corrupted_tables_are_refused_at_boot_and_the_reason_reported() {
     assert_eq!(why, StatusReason::NoRig);
     rows.push(format!("rig blob bit flipped: {why:?}"));
     println!(
-        "| corrupted tables (bit flips ×6, truncations ×4, wrong version, corrupted rig) | {} | — | refused at boot: {} | — | 0 | 0 |",
+        "| corrupted tables (random bit flips ×6, truncations ×4, erased slot, magic, wrong version, corrupted rig) | {} | — | refused at boot: {} | — | 0 | 0 |",
         rows.len(),
         rows.len()
     );

@@ -99,7 +99,8 @@ pub mod synth_ref {
         slerp(b1, b2, s)
     }
 
-    /// Deterministic xorshift64* generator for test inputs.
+    /// Deterministic xorshift64* generator for test inputs (shared by the
+    /// tests that need random inputs).
     pub struct Rng(u64);
 
     impl Rng {
@@ -115,6 +116,18 @@ pub mod synth_ref {
             x ^= x >> 27;
             self.0 = x;
             x.wrapping_mul(0x2545_f491_4f6c_dd1d)
+        }
+        /// Uniform in `0..n` (`0` when `n` is 0).
+        pub fn below(&mut self, n: usize) -> usize {
+            (self.next_u64() % n.max(1) as u64) as usize
+        }
+        /// A uniformly distributed byte.
+        pub fn byte(&mut self) -> u8 {
+            (self.next_u64() >> 56) as u8
+        }
+        /// Uniform in `[0, 1)`.
+        pub fn unit(&mut self) -> f64 {
+            self.range(0.0, 1.0)
         }
         /// Uniform in `[lo, hi)`.
         pub fn range(&mut self, lo: f64, hi: f64) -> f64 {

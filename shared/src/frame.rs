@@ -152,6 +152,7 @@ impl<'a> Region<'a> {
                 StatusReason::Ok => (Some(t), StatusReason::Ok),
                 why => (None, why),
             },
+            Err(TableError::BadMagic) if erased(table_bytes) => (None, StatusReason::NoTable),
             Err(e) => (None, table_reason(e)),
         };
         Self {
@@ -173,10 +174,17 @@ fn check_table(rig: &Rig<'_>, table: &Table<'_>) -> StatusReason {
     }
 }
 
+/// Whether the table slot starts like erased flash (`FF`) or an empty
+/// emulator region (`00`): no table was written, as opposed to a damaged one.
+fn erased(bytes: &[u8]) -> bool {
+    let head = bytes.get(..4).unwrap_or(&[]);
+    head.iter().all(|&b| b == 0x00) || head.iter().all(|&b| b == 0xFF)
+}
+
 /// The status reason for a table that failed to parse.
 fn table_reason(e: TableError) -> StatusReason {
     match e {
-        TableError::BadMagic => StatusReason::NoTable,
+        TableError::BadMagic => StatusReason::BadMagic,
         TableError::BadVersion { .. } => StatusReason::BadVersion,
         TableError::BadCrc => StatusReason::BadCrc,
         _ => StatusReason::BadBounds,
