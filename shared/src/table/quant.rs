@@ -189,7 +189,7 @@ pub fn quantize_rotation(q: Quat) -> [u8; ROTATION_LEN] {
 /// Decodes a "smallest three" rotation: the three stored components, the
 /// dropped one rebuilt as `√(1 − a² − b² − c²)` (as `x · rsqrt(x)`), then
 /// renormalized by one Newton step of `rsqrt` from 1 (exact for a norm of
-/// 1); codes no writer produces (`a² + b² + c² > 0.8`) take
+/// 1); codes no writer produces (`a² + b² + c² ≥ 1`) take
 /// [`math::normalize_quat`] instead. Bit 47 is ignored. Every bit pattern
 /// decodes to a unit quaternion.
 #[must_use]
@@ -201,11 +201,6 @@ pub fn dequantize_rotation(bytes: &[u8; ROTATION_LEN]) -> Quat {
     rotation_from_words(lo, hi)
 }
 
-/// Smallest `1 − a² − b² − c²` decoded on the fast path. Written codes have
-/// at least `1/4` (the dropped component is the largest of four whose
-/// squares sum to 1) less rounding.
-const REST_MIN: f32 = 0.2;
-
 /// [`dequantize_rotation`] of the 48-bit word `lo | hi << 32`.
 #[inline(always)]
 fn rotation_from_words(lo: u32, hi: u32) -> Quat {
@@ -214,9 +209,10 @@ fn rotation_from_words(lo: u32, hi: u32) -> Quat {
     let c = decode_component(hi);
     let small = a * a + b * b + c * c;
     let rest = 1.0 - small;
-    // One unsigned compare for REST_MIN ≤ rest < 1 (rest = 1 is exact below).
-    let fast = rest.to_bits().wrapping_sub(REST_MIN.to_bits())
-        < 1.0f32.to_bits().wrapping_sub(REST_MIN.to_bits());
+    // One unsigned compare for `f32::MIN_POSITIVE ≤ rest < 1` (both
+    // constants are Thumb-2 immediates); `rest = 1` is exact below.
+    let fast = rest.to_bits().wrapping_sub(f32::MIN_POSITIVE.to_bits())
+        < 1.0f32.to_bits() - f32::MIN_POSITIVE.to_bits();
     if !fast {
         return rotation_edge(lo & 3, [a, b, c], rest);
     }
@@ -244,7 +240,7 @@ fn place(index: u32, big: f32, [a, b, c]: [f32; 3]) -> Quat {
 }
 
 /// The codes off the fast path: `rest = 1` (axis-aligned, exact) and codes
-/// no writer produces (`rest < REST_MIN`, fully normalized).
+/// no writer produces (`rest < f32::MIN_POSITIVE`, fully normalized).
 #[cold]
 fn rotation_edge(index: u32, s: [f32; 3], rest: f32) -> Quat {
     if rest >= 1.0 {
