@@ -972,7 +972,7 @@ impl Query {
         let rotations = out.rotations.get_mut(..n).unwrap_or(&mut []);
         match self.trilinear() {
             Some(tree) => tree.pose(samples, positions, rotations),
-            None => self.plan().pose(samples, positions, rotations),
+            None => self.general(samples, positions, rotations),
         }
     }
 
@@ -1006,6 +1006,18 @@ impl Query {
             }
             _ => None,
         }
+    }
+
+    /// [`Query::pose`] through the general tree. Not inlined: its scratch
+    /// (a few kilobytes) then takes stack only when a grid needs it.
+    #[inline(never)]
+    fn general<S: Samples>(
+        &self,
+        samples: &S,
+        positions: &mut [Vec3],
+        rotations: &mut [Quat],
+    ) -> Result<(), GridError> {
+        self.plan().pose(samples, positions, rotations)
     }
 
     /// The window and rotation coefficients of the general tree.
