@@ -372,6 +372,162 @@ fn grid_matches_f64_reference_tree() {
     }
 }
 
+/// Parameters on a cell face, edge or corner: each axis at a random grid
+/// line (`t` exactly 0 or 1 after snapping) with probability ½.
+fn face_params(rng: &mut Rng, axes: &[RefAxis]) -> Vec<f32> {
+    let inside = random_params(rng, axes, 0.0);
+    axes.iter()
+        .zip(inside)
+        .map(|(a, x)| {
+            if rng.range(0.0, 1.0) < 0.5 {
+                let i = (rng.range(0.0, a.count as f64) as usize).min(a.count - 1);
+                (a.min + i as f64 * a.step) as f32
+            } else {
+                x as f32
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn trilinear_tree_on_cell_faces_matches_f64_reference() {
+    // The W&H hand grid's own tree (unnormalized blends, one normalization at
+    // the root) with some levels at an endpoint: the root may then be an
+    // unnormalized blend passed through, and must still come out unit and
+    // within the tree's error. 31 segments: full and partial lane groups.
+    let axes = vec![lin(-0.3, 0.1, 5), lin(0.8, 0.15, 4), lin(0.2, 0.2, 3)];
+    let g = random_grid(axes.clone(), 31, 1.2, 21);
+    let gr = g.rounded();
+    let (caxes, p, q) = core_grid(&g);
+    let grid = Grid::new(&caxes, None).unwrap();
+    let samples = SliceSamples::new(31, &p, &q).unwrap();
+    let mut out = Pose::<31>::default();
+    let mut rng = Rng::new(22);
+    let (mut ep, mut eq, mut en) = (0.0f64, 0.0f64, 0.0f64);
+    for _ in 0..2000 {
+        let xf = face_params(&mut rng, &axes);
+        let query = grid.query(&xf).unwrap();
+        query.pose(&samples, &mut out).unwrap();
+        let xe: Vec<f64> = query.params().iter().map(|&v| f64::from(v)).collect();
+        for seg in 0..31 {
+            let (pe, qe) = gr.eval(&xe, seg);
+            let r = out.rotations[seg];
+            ep = ep.max(dist(v64(out.positions[seg]), pe));
+            eq = eq.max(r::angle_between(q64(r), qe));
+            en = en.max((r::dot(q64(r), q64(r)).sqrt() - 1.0).abs());
+            let one = query.segment(&samples, seg).unwrap();
+            assert_eq!(one, (out.positions[seg], r), "segment {seg} at {xf:?}");
+        }
+    }
+    println!("cell faces: max position error {ep:e} m, rotation {eq:e} rad, |q| − 1 {en:e}");
+    assert!(ep < 1e-5, "{ep:e}");
+    assert!(eq < 5e-5, "{eq:e}");
+    assert!(en < 1e-6, "{en:e}");
+}
+
+/// Samples read one call at a time (no [`Samples::row`]), optionally hinting
+/// that they decode: the grid's other read paths.
+struct OneByOne<'a> {
+    inner: SliceSamples<'a>,
+}
+
+impl Samples for OneByOne<'_> {
+    fn segment_count(&self) -> usize {
+        self.inner.segment_count()
+    }
+    fn sample_count(&self) -> usize {
+        self.inner.sample_count()
+    }
+    fn sample(&self, index: usize, segment: usize) -> Option<(Vec3, Quat)> {
+        self.inner.sample(index, segment)
+    }
+}
+
+/// [`OneByOne`] with the decoding hint set.
+struct Decoding<'a>(OneByOne<'a>);
+
+impl Samples for Decoding<'_> {
+    const DECODES: bool = true;
+    fn segment_count(&self) -> usize {
+        self.0.segment_count()
+    }
+    fn sample_count(&self) -> usize {
+        self.0.sample_count()
+    }
+    fn sample(&self, index: usize, segment: usize) -> Option<(Vec3, Quat)> {
+        self.0.sample(index, segment)
+    }
+}
+
+#[test]
+fn every_read_path_gives_the_same_bits() {
+    // Host blocks and the Cortex-M's one-segment-at-a-time path
+    // (`pose_scalar`), with rows, one call per sample, or the decoding hint:
+    // the same operations in the same order, so the same bits, on the hand
+    // grid (its own tree), the pedal layout and a 2-axis grid.
+    let cr = |a: RefAxis| RefAxis { cubic: true, ..a };
+    let cyc = |a: RefAxis| RefAxis { cyclic: true, ..a };
+    let configs = [
+        vec![lin(-0.3, 0.1, 5), lin(0.8, 0.15, 4), lin(0.2, 0.2, 3)],
+        vec![
+            lin(-0.2, 0.1, 3),
+            lin(0.1, 0.05, 3),
+            cr(cyc(lin(0.0, std::f64::consts::TAU / 8.0, 8))),
+        ],
+        vec![lin(0.0, 0.5, 6), lin(1.0, 1.0, 2)],
+    ];
+    let bits = |p: &Pose<31>| {
+        let pos = p
+            .positions
+            .iter()
+            .flat_map(|v| v.to_array().map(f32::to_bits));
+        let rot = p
+            .rotations
+            .iter()
+            .flat_map(|q| q.to_array().map(f32::to_bits));
+        pos.chain(rot).collect::<Vec<u32>>()
+    };
+    let mut rng = Rng::new(31);
+    for (ci, axes) in configs.into_iter().enumerate() {
+        let g = random_grid(axes.clone(), 31, 1.2, 40 + ci as u64);
+        let (caxes, p, q) = core_grid(&g);
+        let grid = Grid::new(&caxes, None).unwrap();
+        let rows = SliceSamples::new(31, &p, &q).unwrap();
+        let calls = OneByOne { inner: rows };
+        let decoding = Decoding(OneByOne { inner: rows });
+        let (mut a, mut b) = (Pose::<31>::default(), Pose::<31>::default());
+        for i in 0..500 {
+            let xf = if i % 2 == 0 {
+                face_params(&mut rng, &axes)
+            } else {
+                let x = random_params(&mut rng, &axes, 0.1);
+                x.iter().map(|&v| v as f32).collect()
+            };
+            let query = grid.query(&xf).unwrap();
+            query.pose(&rows, &mut a).unwrap();
+            let want = bits(&a);
+            query.pose_scalar(&rows, &mut b).unwrap();
+            assert_eq!(bits(&b), want, "config {ci}, scalar rows, {xf:?}");
+            query.pose(&calls, &mut b).unwrap();
+            assert_eq!(bits(&b), want, "config {ci}, calls, {xf:?}");
+            query.pose_scalar(&calls, &mut b).unwrap();
+            assert_eq!(bits(&b), want, "config {ci}, scalar calls, {xf:?}");
+            query.pose(&decoding, &mut b).unwrap();
+            assert_eq!(bits(&b), want, "config {ci}, decoding, {xf:?}");
+            query.pose_scalar(&decoding, &mut b).unwrap();
+            assert_eq!(bits(&b), want, "config {ci}, scalar decoding, {xf:?}");
+        }
+    }
+}
+
+#[test]
+fn a_query_is_small() {
+    // Returned by value every frame (`Grid::query`): per-axis data only, the
+    // per-segment coefficients are derived by `Query::pose`.
+    let size = std::mem::size_of::<marionette_core::grid::Query>();
+    assert!(size <= 320, "{size} bytes");
+}
+
 /// One Catmull-Rom axis with `count` samples of scalar data (in x), rotation
 /// about Z by the same value (radians).
 fn scalar_cr_grid(

@@ -355,6 +355,63 @@ fn grid_query_reads_samples_in_place() {
     assert!(!grid.cell_valid(0) && grid.cell_valid(1));
 }
 
+/// Synthesis reads the quantized samples in place exactly as it reads the
+/// same samples decoded into memory: the same bits, on the host's blocks and
+/// on the Cortex-M's one-segment-at-a-time path, for a three-linear-axis
+/// table (the hand grid's own tree) and the pedal layout with its mask.
+#[test]
+fn grid_pose_from_the_blob_equals_pose_from_decoded_samples() {
+    use marionette_core::grid::SliceSamples;
+    use marionette_core::pose::Pose;
+    let mut rng = Rng(17);
+    let pedal = random_grid(&mut rng, 31, 1.5);
+    let mut hand = random_grid(&mut rng, 31, 1.5);
+    hand.axes[2] = axis("hand_z", -0.2, 0.1, 5, Wrap::Bounded, Interp::Linear);
+    hand.valid = vec![true; 3 * 2 * 4];
+    for spec in [hand, pedal] {
+        let bytes = blob::write(&spec).unwrap();
+        let t = Table::parse(&bytes).unwrap();
+        let grid = t.grid().unwrap();
+        let (mut p, mut q) = (Vec::new(), Vec::new());
+        for i in 0..t.grid_samples() {
+            for s in 0..31 {
+                let (dp, dq) = t.sample(i, s).unwrap();
+                p.push(dp);
+                q.push(dq);
+            }
+        }
+        let decoded = SliceSamples::new(31, &p, &q).unwrap();
+        let bits = |o: &Pose<31>| {
+            let pos = o
+                .positions
+                .iter()
+                .flat_map(|v| v.to_array().map(f32::to_bits));
+            let rot = o
+                .rotations
+                .iter()
+                .flat_map(|q| q.to_array().map(f32::to_bits));
+            pos.chain(rot).collect::<Vec<u32>>()
+        };
+        let (mut a, mut b) = (Pose::<31>::default(), Pose::<31>::default());
+        for _ in 0..300 {
+            let params: Vec<f32> = t
+                .axes()
+                .iter()
+                .map(|ax| {
+                    let span = f64::from(ax.step) * f64::from(ax.count);
+                    rng.range(f64::from(ax.min) - 0.1, f64::from(ax.min) + span) as f32
+                })
+                .collect();
+            let query = grid.query(&params).unwrap();
+            query.pose(&decoded, &mut a).unwrap();
+            query.pose(&t, &mut b).unwrap();
+            assert_eq!(bits(&a), bits(&b), "{params:?}");
+            query.pose_scalar(&t, &mut b).unwrap();
+            assert_eq!(bits(&a), bits(&b), "scalar, {params:?}");
+        }
+    }
+}
+
 #[test]
 fn clip_table_round_trip() {
     let mut rng = Rng(3);

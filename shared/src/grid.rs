@@ -963,6 +963,27 @@ impl Query {
         samples: &S,
         out: &mut Pose<N>,
     ) -> Result<(), GridError> {
+        self.pose_on(samples, out, WIDE)
+    }
+
+    /// [`Query::pose`] through the path the Cortex-M takes (one segment at
+    /// a time) on any target, for tests: the same bits as `pose`.
+    pub fn pose_scalar<S: Samples, const N: usize>(
+        &self,
+        samples: &S,
+        out: &mut Pose<N>,
+    ) -> Result<(), GridError> {
+        self.pose_on(samples, out, false)
+    }
+
+    /// [`Query::pose`], in blocks of [`F4`] lanes if `wide`.
+    #[inline(always)]
+    fn pose_on<S: Samples, const N: usize>(
+        &self,
+        samples: &S,
+        out: &mut Pose<N>,
+        wide: bool,
+    ) -> Result<(), GridError> {
         let n = samples.segment_count();
         if n > N {
             return Err(GridError::Capacity);
@@ -971,8 +992,8 @@ impl Query {
         let positions = out.positions.get_mut(..n).unwrap_or(&mut []);
         let rotations = out.rotations.get_mut(..n).unwrap_or(&mut []);
         match self.trilinear() {
-            Some(tree) => tree.pose(samples, positions, rotations),
-            None => self.general(samples, positions, rotations),
+            Some(tree) => tree.pose(samples, (positions, rotations), wide),
+            None => self.general(samples, (positions, rotations), wide),
         }
     }
 
@@ -1014,10 +1035,15 @@ impl Query {
     fn general<S: Samples>(
         &self,
         samples: &S,
-        positions: &mut [Vec3],
-        rotations: &mut [Quat],
+        (positions, rotations): (&mut [Vec3], &mut [Quat]),
+        wide: bool,
     ) -> Result<(), GridError> {
-        self.plan().pose(samples, positions, rotations)
+        let plan = self.plan();
+        if wide {
+            plan.pose(samples, positions, rotations)
+        } else {
+            plan.scalar_any(samples, 0, (positions, rotations))
+        }
     }
 
     /// The window and rotation coefficients of the general tree.
@@ -1077,15 +1103,15 @@ impl Trilinear {
         }
     }
 
-    /// Every segment: in blocks level by level with [`F4`] lanes where the
-    /// target has SIMD, else one at a time.
+    /// Every segment: in blocks level by level with [`F4`] lanes if
+    /// `wide`, else one at a time.
     fn pose<S: Samples>(
         &self,
         samples: &S,
-        positions: &mut [Vec3],
-        rotations: &mut [Quat],
+        (positions, rotations): (&mut [Vec3], &mut [Quat]),
+        wide: bool,
     ) -> Result<(), GridError> {
-        if WIDE {
+        if wide {
             return self.pose_wide(samples, positions, rotations);
         }
         let all = positions.iter_mut().zip(rotations.iter_mut());
@@ -1261,17 +1287,13 @@ impl Plan {
         self.axes.get(..self.axis_count).unwrap_or(&[])
     }
 
-    /// Every segment: in blocks with [`F4`] lanes where the target has
-    /// SIMD, else one at a time.
+    /// Every segment in blocks, with [`F4`] lanes where the block allows.
     fn pose<S: Samples>(
         &self,
         samples: &S,
         positions: &mut [Vec3],
         rotations: &mut [Quat],
     ) -> Result<(), GridError> {
-        if !WIDE {
-            return self.scalar_any(samples, 0, (positions, rotations));
-        }
         let n = positions.len();
         let block = MAX_WINDOW.checked_div(self.window.len).unwrap_or(1).max(1);
         let mut buf = Soa::new();
