@@ -1104,7 +1104,9 @@ impl Trilinear {
     }
 
     /// Every segment: in blocks level by level with [`F4`] lanes if
-    /// `wide`, else one at a time.
+    /// `wide`, else one at a time. Not inlined: the loop gets the registers
+    /// to itself, whatever the caller keeps live.
+    #[inline(never)]
     fn pose<S: Samples>(
         &self,
         samples: &S,

@@ -170,6 +170,32 @@ fn synth_rows(counter: &mut Counter) {
         1,
         core_ticks,
     );
+    table_row(counter);
+}
+
+/// The live loop's synthesis without its joint-angle conversion: a fresh
+/// query (as the loop makes one per frame) and the pose of the table
+/// region's 16 segments, decoded in place from the quantized blob, inside a
+/// cell of its 5×5×5 grid.
+fn table_row(counter: &mut Counter) {
+    let region = Region::parse(region::tables());
+    let Some((table, Ok(grid))) = region.table.as_ref().map(|t| (t, t.grid())) else {
+        Line::new()
+            .str("synth: no table in the table region")
+            .print();
+        return;
+    };
+    let params = black_box([0.05f32, 0.1, 0.17]);
+    let mut pose = Pose::<16>::default();
+    let ticks = counter.ticks(|| {
+        let Ok(query) = grid.query(&params) else {
+            return false;
+        };
+        let ok = query.pose(table, &mut pose).is_ok();
+        black_box(&pose);
+        ok
+    });
+    report("synth.table16.core", "-", 1, ticks);
 }
 
 /// The CMU skeleton reaching with both hands and feet: goals are the touch
