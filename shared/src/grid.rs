@@ -106,7 +106,7 @@
 
 use glam::{Quat, Vec3};
 
-use crate::math::{self, F4, Lane, SlerpWeight};
+use crate::math::{self, F4, Lane, LaneWeight, SlerpWeight};
 use crate::pose::Pose;
 
 /// Most axes a grid may have.
@@ -953,11 +953,14 @@ impl Query {
     /// of [`SlerpWeight::blend_lanes`] whose result is normalized once
     /// ([`math::renormalize_lanes`]); other grids reduce the window axis by
     /// axis with normalized slerps. On targets with SIMD (the host) segments
-    /// are processed several at a time, the slerps of four segments running
-    /// as [`math::F4`] lanes; on the Cortex-M (no SIMD) each segment runs
-    /// through the scalar path of [`Query::segment`]. Both perform the same
-    /// operations in the same order per segment, so they give the same bits
-    /// (tested).
+    /// are processed in blocks: the window read sample by sample (a run of
+    /// segments at once from [`Samples::row`]), positions weighed 12 floats
+    /// at a time, the slerps of four segments running as [`math::F4`] lanes
+    /// with their coefficients broadcast once ([`SlerpWeight::lanes`]). On
+    /// the Cortex-M (no SIMD) each segment runs on its own
+    /// ([`Query::pose_scalar`] forces that path anywhere). All paths perform
+    /// the same operations in the same order per segment, so they give the
+    /// same bits (tested).
     pub fn pose<S: Samples, const N: usize>(
         &self,
         samples: &S,
@@ -1183,6 +1186,7 @@ impl Trilinear {
     ) -> Result<(), GridError> {
         const BLOCK: usize = MAX_WINDOW / 8;
         let mut buf = Soa::new();
+        let weights = self.slerp.each_ref().map(SlerpWeight::lanes::<F4>);
         let blocks = positions.chunks_mut(BLOCK).zip(rotations.chunks_mut(BLOCK));
         for (k, (p, r)) in blocks.enumerate() {
             let count = p.len();
@@ -1190,7 +1194,7 @@ impl Trilinear {
             fetch_block(samples, window, (k * BLOCK, BLOCK), p, &mut buf)?;
             for lane in [0, 4] {
                 if lane < count {
-                    self.tree_lanes::<BLOCK>(&mut buf, lane);
+                    self.tree_lanes::<BLOCK>(&weights, &mut buf, lane);
                 }
             }
             buf.store(r);
@@ -1202,20 +1206,16 @@ impl Trilinear {
     /// `[window][B]`, level by level in place; the results end up in slots
     /// `lane..lane + 4`.
     #[inline(always)]
-    fn tree_lanes<const B: usize>(&self, buf: &mut Soa, lane: usize) {
-        let mut len = 8;
-        for w in &self.slerp {
-            len /= 2;
-            for i in 0..len {
-                let (a, b) = (
-                    buf.get4((2 * i) * B + lane),
-                    buf.get4((2 * i + 1) * B + lane),
-                );
-                if let (Some(a), Some(b)) = (a, b) {
-                    buf.set4(i * B + lane, w.blend_lanes(a, b));
-                }
-            }
-        }
+    fn tree_lanes<const B: usize>(
+        &self,
+        weights: &[LaneWeight<F4>; 3],
+        buf: &mut Soa,
+        lane: usize,
+    ) {
+        let [x, y, z] = weights;
+        blend_pairs::<B>(buf, x, 4, lane);
+        blend_pairs::<B>(buf, y, 2, lane);
+        blend_pairs::<B>(buf, z, 1, lane);
         if self.blends
             && let Some(r) = buf.get4(lane)
         {
@@ -1460,6 +1460,18 @@ fn weigh(positions: &mut [Vec3], samples: &[Vec3], w: f32, first: bool) {
     }
     for (p, &s) in tail.iter_mut().zip(samples.iter().skip(wide)) {
         *p = if first { s * w } else { *p + s * w };
+    }
+}
+
+/// `g[i] = blend(g[2i], g[2i+1])` for `i < len` on slots `lane..lane + 4` of
+/// each window group `g` (stride `B`).
+#[inline(always)]
+fn blend_pairs<const B: usize>(buf: &mut Soa, w: &LaneWeight<F4>, len: usize, lane: usize) {
+    for i in 0..len {
+        let (a, b) = (buf.get4(2 * i * B + lane), buf.get4((2 * i + 1) * B + lane));
+        if let (Some(a), Some(b)) = (a, b) {
+            buf.set4(i * B + lane, w.blend_lanes(a, b));
+        }
     }
 }
 

@@ -553,16 +553,8 @@ fn weight_poly(s: f32) -> [f32; 6] {
 /// Evaluates a degree-5 polynomial in `x` given `x²`, `x⁴` (Estrin's scheme:
 /// the same operation count as Horner with a third of its latency).
 #[inline(always)]
-fn poly5<T: Lane>(c: &[f32; 6], x: T, x2: T, x4: T) -> T {
+fn poly5<T: Lane>(c: &[T; 6], x: T, x2: T, x4: T) -> T {
     let [c0, c1, c2, c3, c4, c5] = *c;
-    let (c0, c1, c2, c3, c4, c5) = (
-        T::splat(c0),
-        T::splat(c1),
-        T::splat(c2),
-        T::splat(c3),
-        T::splat(c4),
-        T::splat(c5),
-    );
     ((c0 + c1 * x) + x2 * (c2 + c3 * x)) + x4 * (c4 + c5 * x)
 }
 
@@ -599,7 +591,9 @@ impl Lane for f32 {
 
 /// Four `f32` lanes with lane-wise IEEE operations (the compiler maps them to
 /// SIMD where the target has it). Used to run four segments' slerps at once.
+/// Aligned like a SIMD register, so an `F4` in memory can be an operand.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(16))]
 pub struct F4(pub [f32; 4]);
 
 macro_rules! f4_op {
@@ -765,28 +759,69 @@ impl SlerpWeight {
         renormalize_lanes(self.blend(a, b))
     }
 
+    /// The weight with its polynomial coefficients as lane values (for
+    /// [`F4`], each broadcast to four lanes once rather than in every
+    /// blend).
+    #[inline]
+    #[must_use]
+    pub fn lanes<T: Lane>(&self) -> LaneWeight<T> {
+        LaneWeight {
+            w0: self.w0.map(T::splat),
+            w1: self.w1.map(T::splat),
+            mode: self.mode,
+        }
+    }
+
     /// [`SlerpWeight::blend_lanes`] for a weight known to blend
     /// ([`SlerpWeight::is_blend`]); an endpoint weight gives zeros.
     #[inline(always)]
     #[must_use]
     pub(crate) fn blend<T: Lane>(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
-        let [ax, ay, az, aw] = a;
-        let [bx, by, bz, bw] = b;
-        // Pairwise sums: shorter dependency chains (the order is fixed, so the
-        // bits are still the same on every target).
-        let d = (ax * bx + ay * by) + (az * bz + aw * bw);
-        let x = d.abs();
-        let x2 = x * x;
-        let x4 = x2 * x2;
-        let w0 = poly5(&self.w0, x, x2, x4);
-        let w1 = poly5(&self.w1, x, x2, x4).copysign(d);
-        [
-            ax * w0 + bx * w1,
-            ay * w0 + by * w1,
-            az * w0 + bz * w1,
-            aw * w0 + bw * w1,
-        ]
+        blend(&self.w0.map(T::splat), &self.w1.map(T::splat), a, b)
     }
+}
+
+/// A [`SlerpWeight`] whose polynomial coefficients are lane values
+/// ([`SlerpWeight::lanes`]): the same operations, so the same bits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LaneWeight<T> {
+    w0: [T; 6],
+    w1: [T; 6],
+    mode: SlerpMode,
+}
+
+impl<T: Lane> LaneWeight<T> {
+    /// [`SlerpWeight::blend_lanes`] with this weight.
+    #[inline(always)]
+    #[must_use]
+    pub fn blend_lanes(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
+        match self.mode {
+            SlerpMode::Start => a,
+            SlerpMode::End => b,
+            SlerpMode::Mid => blend(&self.w0, &self.w1, a, b),
+        }
+    }
+}
+
+/// The fast slerp's unnormalized blend `w0·a + w1·b` (see the module doc).
+#[inline(always)]
+fn blend<T: Lane>(c0: &[T; 6], c1: &[T; 6], a: [T; 4], b: [T; 4]) -> [T; 4] {
+    let [ax, ay, az, aw] = a;
+    let [bx, by, bz, bw] = b;
+    // Pairwise sums: shorter dependency chains (the order is fixed, so the
+    // bits are still the same on every target).
+    let d = (ax * bx + ay * by) + (az * bz + aw * bw);
+    let x = d.abs();
+    let x2 = x * x;
+    let x4 = x2 * x2;
+    let w0 = poly5(c0, x, x2, x4);
+    let w1 = poly5(c1, x, x2, x4).copysign(d);
+    [
+        ax * w0 + bx * w1,
+        ay * w0 + by * w1,
+        az * w0 + bz * w1,
+        aw * w0 + bw * w1,
+    ]
 }
 
 /// One Newton step for `1/|r|` from 1: `r · (3 − |r|²)/2`. Normalizes a

@@ -2,12 +2,13 @@
 //! (3 linear axes, 8-sample window, 7 slerps + 7 lerps per segment) with the
 //! core's fast slerp, against the same tree built from glam's `Quat::slerp`
 //! and `Vec3::lerp`, plus the W&H pedalling layout (2 linear axes and a cyclic
-//! Catmull-Rom axis) and the query alone.
+//! Catmull-Rom axis) and the query alone. Throughput is reported per pose
+//! (criterion's `elem/s` is poses per second).
 
 use std::hint::black_box;
 use std::time::Duration;
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use glam::{Quat, Vec3};
 use marionette_core::grid::{Axis, AxisKind, Grid, Interp, SliceSamples};
 use marionette_core::pose::Pose;
@@ -93,8 +94,10 @@ fn bench(c: &mut Criterion) {
         .collect();
     let mut out = Pose::<32>::default();
 
+    let mut group = c.benchmark_group("trilinear_31seg");
+    group.throughput(Throughput::Elements(1));
     let mut i = 0usize;
-    c.bench_function("trilinear_31seg/core_fast_slerp", |b| {
+    group.bench_function("core_fast_slerp", |b| {
         b.iter(|| {
             i = (i + 1) % params.len();
             grid.synthesize(&src, black_box(&params[i]), &mut out)
@@ -104,7 +107,7 @@ fn bench(c: &mut Criterion) {
     });
 
     let mut i = 0usize;
-    c.bench_function("trilinear_31seg/glam_slerp_baseline", |b| {
+    group.bench_function("glam_slerp_baseline", |b| {
         b.iter(|| {
             i = (i + 1) % params.len();
             let x = black_box(params[i]);
@@ -123,12 +126,13 @@ fn bench(c: &mut Criterion) {
     });
 
     let mut i = 0usize;
-    c.bench_function("trilinear_31seg/query_only", |b| {
+    group.bench_function("query_only", |b| {
         b.iter(|| {
             i = (i + 1) % params.len();
             black_box(grid.query(black_box(&params[i])).expect("query"));
         })
     });
+    group.finish();
 
     // W&H pedalling: cylindrical axis x, radius r (linear), angle (cyclic Catmull-Rom).
     let tau = std::f32::consts::TAU;
@@ -147,7 +151,9 @@ fn bench(c: &mut Criterion) {
     let (pp, pq) = samples(pedal.sample_count(), &mut rng);
     let psrc = SliceSamples::new(SEGMENTS, &pp, &pq).expect("samples");
     let mut angle = 0.0f32;
-    c.bench_function("pedal_31seg/linear_linear_cyclic_catmull_rom", |b| {
+    let mut group = c.benchmark_group("pedal_31seg");
+    group.throughput(Throughput::Elements(1));
+    group.bench_function("linear_linear_cyclic_catmull_rom", |b| {
         b.iter(|| {
             angle += 0.01;
             pedal
@@ -156,6 +162,7 @@ fn bench(c: &mut Criterion) {
             black_box(&out);
         })
     });
+    group.finish();
 }
 
 criterion_group! {
