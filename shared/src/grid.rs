@@ -1120,7 +1120,17 @@ impl Trilinear {
             return self.pose_wide(samples, positions, rotations);
         }
         let all = positions.iter_mut().zip(rotations.iter_mut());
-        if self.slerp.iter().all(SlerpWeight::is_blend) {
+        let rows = self.index.map(|i| samples.row(i as usize));
+        if self.slerp.iter().all(SlerpWeight::is_blend) && rows.iter().all(Option::is_some) {
+            // In memory: the window's rows once, then one check per read.
+            let rows = rows.map(|r| r.unwrap_or((&[], &[])));
+            for (seg, (p, r)) in all.enumerate() {
+                (*p, *r) = self.segment_blend_by(|j| {
+                    let (ps, qs) = rows.get(j)?;
+                    Some((*ps.get(seg)?, *qs.get(seg)?))
+                })?;
+            }
+        } else if self.slerp.iter().all(SlerpWeight::is_blend) {
             for (seg, (p, r)) in all.enumerate() {
                 (*p, *r) = self.segment_blend(samples, seg)?;
             }
@@ -1143,32 +1153,43 @@ impl Trilinear {
         samples: &S,
         segment: usize,
     ) -> Result<(Vec3, Quat), GridError> {
-        let [x, y, z] = &self.slerp;
         if S::DECODES {
+            let [x, y, z] = &self.slerp;
             let (p, [q0, q1, q2, q3, q4, q5, q6, q7]) = self.fetch(samples, segment)?;
             let ab = y.blend(x.blend(q0, q1), x.blend(q2, q3));
             let cd = y.blend(x.blend(q4, q5), x.blend(q6, q7));
             let [rx, ry, rz, rw] = math::renormalize_lanes(z.blend(ab, cd));
             return Ok((p, Quat::from_xyzw(rx, ry, rz, rw)));
         }
-        let [i0, i1, i2, i3, i4, i5, i6, i7] = self.index;
+        self.segment_blend_by(|j| {
+            let &index = self.index.get(j)?;
+            samples.sample(index as usize, segment)
+        })
+    }
+
+    /// [`Trilinear::segment_blend`] pair by pair, window sample `j` read by
+    /// `read(j)`.
+    #[inline(always)]
+    fn segment_blend_by(
+        &self,
+        read: impl Fn(usize) -> Option<(Vec3, Quat)>,
+    ) -> Result<(Vec3, Quat), GridError> {
+        let [x, y, z] = &self.slerp;
         let [w0, w1, w2, w3, w4, w5, w6, w7] = self.weight;
-        let get = |i: u32| {
-            let (p, q) = samples
-                .sample(i as usize, segment)
-                .ok_or(GridError::MissingSample)?;
+        let get = |j: usize| {
+            let (p, q) = read(j).ok_or(GridError::MissingSample)?;
             Ok::<_, GridError>((p, [q.x, q.y, q.z, q.w]))
         };
-        let ((p0, q0), (p1, q1)) = (get(i0)?, get(i1)?);
+        let ((p0, q0), (p1, q1)) = (get(0)?, get(1)?);
         let mut p = p0 * w0 + p1 * w1;
         let a = x.blend(q0, q1);
-        let ((p2, q2), (p3, q3)) = (get(i2)?, get(i3)?);
+        let ((p2, q2), (p3, q3)) = (get(2)?, get(3)?);
         p = p + p2 * w2 + p3 * w3;
         let ab = y.blend(a, x.blend(q2, q3));
-        let ((p4, q4), (p5, q5)) = (get(i4)?, get(i5)?);
+        let ((p4, q4), (p5, q5)) = (get(4)?, get(5)?);
         p = p + p4 * w4 + p5 * w5;
         let c = x.blend(q4, q5);
-        let ((p6, q6), (p7, q7)) = (get(i6)?, get(i7)?);
+        let ((p6, q6), (p7, q7)) = (get(6)?, get(7)?);
         p = p + p6 * w6 + p7 * w7;
         let cd = y.blend(c, x.blend(q6, q7));
         let [rx, ry, rz, rw] = math::renormalize_lanes(z.blend(ab, cd));
