@@ -1109,9 +1109,8 @@ impl Trilinear {
     }
 
     /// Every segment: in blocks level by level with [`F4`] lanes if
-    /// `wide`, else one at a time. Not inlined: the loop gets the registers
-    /// to itself, whatever the caller keeps live.
-    #[inline(never)]
+    /// `wide`, else one at a time.
+    #[inline(always)]
     fn pose<S: Samples>(
         &self,
         samples: &S,
@@ -1119,8 +1118,21 @@ impl Trilinear {
         wide: bool,
     ) -> Result<(), GridError> {
         if wide {
-            return self.pose_wide(samples, positions, rotations);
+            self.pose_wide(samples, positions, rotations)
+        } else {
+            self.pose_each(samples, positions, rotations)
         }
+    }
+
+    /// Every segment, one at a time (the Cortex-M path). Not inlined: the
+    /// loop gets the registers to itself, whatever the caller keeps live.
+    #[inline(never)]
+    fn pose_each<S: Samples>(
+        &self,
+        samples: &S,
+        positions: &mut [Vec3],
+        rotations: &mut [Quat],
+    ) -> Result<(), GridError> {
         let all = positions.iter_mut().zip(rotations.iter_mut());
         let rows = self.index.map(|i| samples.row(i as usize));
         if self.slerp.iter().all(SlerpWeight::is_blend) && rows.iter().all(Option::is_some) {
@@ -1201,6 +1213,7 @@ impl Trilinear {
     /// The host path: blocks of `MAX_WINDOW / 8` segments, the same
     /// operations as [`Trilinear::segment`] level by level on four segments
     /// at a time.
+    #[inline(never)]
     fn pose_wide<S: Samples>(
         &self,
         samples: &S,
