@@ -60,6 +60,13 @@ impl Axis {
     #[must_use]
     pub fn rotation(self, angle: f32) -> Quat {
         let (s, c) = math::sin_cos(0.5 * angle);
+        self.rotation_half(s, c)
+    }
+
+    /// [`Axis::rotation`] from the sine and cosine of half the angle.
+    #[inline]
+    #[must_use]
+    pub const fn rotation_half(self, s: f32, c: f32) -> Quat {
         match self {
             Axis::X => Quat::from_xyzw(s, 0.0, 0.0, c),
             Axis::Y => Quat::from_xyzw(0.0, s, 0.0, c),
@@ -73,6 +80,13 @@ impl Axis {
     #[must_use]
     pub fn rotate_after(self, q: Quat, angle: f32) -> Quat {
         let (s, c) = math::sin_cos(0.5 * angle);
+        self.rotate_after_half(q, s, c)
+    }
+
+    /// [`Axis::rotate_after`] from the sine and cosine of half the angle.
+    #[inline]
+    #[must_use]
+    pub fn rotate_after_half(self, q: Quat, s: f32, c: f32) -> Quat {
         let (x, y, z, w) = (q.x, q.y, q.z, q.w);
         match self {
             Axis::X => Quat::from_xyzw(x * c + w * s, y * c + z * s, z * c - y * s, w * c - x * s),

@@ -63,7 +63,10 @@ mod balance;
 mod ccd;
 mod dls;
 mod greedy;
+mod joints;
 mod reach;
+mod slots;
+mod system;
 mod tree;
 
 pub use reach::ReachTree;
@@ -72,7 +75,7 @@ pub use tree::MAX_GOALS;
 use crate::body::{Angles, Body, BodyError};
 use crate::goal::{Attach, Frame, Goal, GoalSet, Residual, Target};
 use crate::math;
-use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
+use crate::pose::{LocalPose, MAX_SEGMENTS, Pose};
 use glam::Vec3;
 
 /// Which algorithm positions the body.
@@ -119,6 +122,12 @@ pub struct Solver {
     /// (one more forward kinematics per iteration; fewer iterations when goals
     /// conflict).
     pub extrapolate: bool,
+    /// [`Method::TreeDls`]: when the goals are not all met, solve again from
+    /// this many other starts (the rest pose, then poses spread over the
+    /// joints' ranges) and keep the lowest error. The problem is not convex,
+    /// so this finds better minima far from the start; a live loop wants the
+    /// minimum near its synthesized start instead, and 0.
+    pub restarts: u8,
 }
 
 impl Solver {
@@ -131,17 +140,21 @@ impl Solver {
         tolerance: 1e-5,
         damping: 0.1,
         extrapolate: true,
+        restarts: 0,
     };
 
-    /// The default: whole-tree damped least squares, root fixed.
+    /// The default: whole-tree damped least squares, root fixed, goals met to
+    /// 0.1 mm (a hobby servo's resolution is about 0.1°, half a millimetre at
+    /// the end of a 30 cm limb).
     pub const DEFAULT: Solver = Solver {
         method: Method::TreeDls,
         root: RootMode::Fixed,
         max_iterations: 20,
         chain_iterations: 6,
-        tolerance: 1e-5,
+        tolerance: 1e-4,
         damping: 0.1,
-        extrapolate: true,
+        extrapolate: false,
+        restarts: 0,
     };
 
     /// The same configuration with another method.
@@ -162,6 +175,13 @@ impl Solver {
     #[must_use]
     pub const fn with_iterations(mut self, max_iterations: u16) -> Self {
         self.max_iterations = max_iterations;
+        self
+    }
+
+    /// The same configuration with another number of restarts.
+    #[must_use]
+    pub const fn with_restarts(mut self, restarts: u8) -> Self {
+        self.restarts = restarts;
         self
     }
 }
@@ -247,14 +267,19 @@ pub fn solve<const N: usize, const G: usize>(
     angles: &mut Angles<N>,
     pose: &mut Pose<N>,
 ) -> Result<Report<G>, SolveError> {
-    let mut work = Work::new(body, goals.as_slice(), angles, pose)?;
-    let tree = ReachTree::<N>::build(body, goals.as_slice())?;
-    let (iterations, converged) = if tree.is_empty() {
-        (0, true)
-    } else {
-        match solver.method {
-            Method::TreeDls => tree::solve(solver, &tree, &mut work)?,
-            Method::Greedy | Method::Ccd | Method::Dls => balance::solve(solver, &tree, &mut work)?,
+    let mut work = Work::new(body, goals.as_slice(), angles, pose);
+    work.check()?;
+    let mut tree = ReachTree::<N>::EMPTY;
+    tree.fill(body, goals.as_slice())?;
+    let (iterations, converged) = match solver.method {
+        Method::TreeDls if !tree.is_empty() => tree::solve(solver, &tree, &mut work)?,
+        _ => {
+            work.forward()?;
+            if tree.is_empty() {
+                (0, true)
+            } else {
+                balance::solve(solver, &tree, &mut work)?
+            }
         }
     };
     let mut report = Report {
@@ -312,21 +337,35 @@ pub(crate) struct Work<'w, 'b, const N: usize> {
 }
 
 impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
+    /// The state of a solve of `goals` from `angles`, not yet checked.
     fn new(
         body: &'w Body<'b>,
         goals: &'w [Goal],
         angles: &'w mut Angles<N>,
         pose: &'w mut Pose<N>,
-    ) -> Result<Self, SolveError> {
-        // The body's structure is checked by `pose::forward` (parents before
-        // children, matching slices); its joints by `Body::validate`, once.
+    ) -> Self {
+        Work {
+            body,
+            goals,
+            angles,
+            pose,
+            local: LocalPose::default(),
+        }
+    }
+
+    /// Checks the body's structure (capacity, parents before children,
+    /// matching slices; its joints are checked by `Body::validate`, once),
+    /// the joint state and the goals, and clamps the angles into their
+    /// limits.
+    fn check(&mut self) -> Result<(), SolveError> {
+        let body = self.body;
         if body.len() > N || body.len() > MAX_SEGMENTS {
             return Err(SolveError::Capacity);
         }
-        if angles.count != body.len() {
+        if self.angles.count != body.len() {
             return Err(SolveError::Body(BodyError::CountMismatch));
         }
-        for (g, i) in goals.iter().zip(0u8..) {
+        for (g, i) in self.goals.iter().zip(0u8..) {
             let frame_ok = match g.frame {
                 Frame::World => true,
                 Frame::Segment(s) => usize::from(s) < body.len(),
@@ -339,44 +378,16 @@ impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
                 return Err(SolveError::BadGoal(i));
             }
         }
-        angles.clamp_to_limits(body);
-        let mut w = Work {
-            body,
-            goals,
-            angles,
-            pose,
-            local: LocalPose::default(),
-        };
-        w.forward()?;
-        Ok(w)
+        body.hierarchy()
+            .validate()
+            .map_err(|e| SolveError::Body(BodyError::Pose(e)))?;
+        self.angles.clamp_to_limits(body);
+        Ok(())
     }
 
     /// Recomputes the world pose from the angles (the one forward kinematics).
     pub fn forward(&mut self) -> Result<(), SolveError> {
         self.angles.forward(self.body, &mut self.local, self.pose)?;
-        Ok(())
-    }
-
-    /// Recomputes the world pose after only the joints of the segments in
-    /// `mask` (bit `i` = segment `i`) and the root placement changed: their
-    /// joint rotations are rebuilt from the angles, the others are reused.
-    pub fn forward_segments(&mut self, mask: u64) -> Result<(), SolveError> {
-        self.local.root_position = self.angles.root_position;
-        for (i, ((r, v), s)) in self
-            .local
-            .rotations
-            .iter_mut()
-            .zip(&self.angles.values)
-            .zip(self.body.segments)
-            .enumerate()
-            .skip(1)
-        {
-            if mask >> i & 1 != 0 {
-                *r = s.joint.rotation(v);
-            }
-        }
-        pose::forward(&self.body.hierarchy(), &self.local, self.pose)
-            .map_err(|e| SolveError::Body(BodyError::Pose(e)))?;
         Ok(())
     }
 

@@ -31,6 +31,23 @@ impl<const N: usize> ReachTree<N> {
     /// segment's frame makes both segments nodes: it pulls them towards each
     /// other. An empty goal set gives an empty tree.
     pub fn build(body: &Body<'_>, goals: &[Goal]) -> Result<Self, SolveError> {
+        let mut tree = Self::EMPTY;
+        tree.fill(body, goals)?;
+        Ok(tree)
+    }
+
+    /// An empty tree.
+    pub(crate) const EMPTY: Self = ReachTree {
+        len: 0,
+        segment: [0; N],
+        parent: [NO_PARENT; N],
+        node_of: [NO_PARENT; N],
+        on_path: 0,
+        ancestry: [0; N],
+    };
+
+    /// [`ReachTree::build`] into an empty tree, in place.
+    pub(crate) fn fill(&mut self, body: &Body<'_>, goals: &[Goal]) -> Result<(), SolveError> {
         let n = body.len();
         if n > N {
             return Err(SolveError::Capacity);
@@ -63,14 +80,7 @@ impl<const N: usize> ReachTree<N> {
                 }
             }
         }
-        let mut tree = ReachTree {
-            len: 0,
-            segment: [0; N],
-            parent: [NO_PARENT; N],
-            node_of: [NO_PARENT; N],
-            on_path: 0,
-            ancestry: [0; N],
-        };
+        let tree = self;
         for s in 0..n {
             let up = body
                 .parent(s)
@@ -90,7 +100,7 @@ impl<const N: usize> ReachTree<N> {
                 tree.push(body, s);
             }
         }
-        Ok(tree)
+        Ok(())
     }
 
     /// Appends segment `s` as a node, linking it to its nearest node ancestor.

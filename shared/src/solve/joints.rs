@@ -1,0 +1,750 @@
+//! The joints the whole-tree solver moves: their groups (one per segment, or
+//! the root translation), the forward kinematics of just the segments the
+//! goals hang from, and the Jacobian columns.
+//!
+//! A column of `J` is `ω × (x − p)` for a DOF with world axis `ω` and pivot
+//! `p`, for every goal whose segment it moves; `ω` for orientation rows; minus
+//! the same terms for a goal given in the frame of a segment the DOF also
+//! moves. Columns are stored scaled by each goal's `√(w / w_max)`, three per
+//! (group, goal) link.
+//!
+//! Everything is sized by the body's capacity `N` (a group per moving
+//! segment; the root, which never turns, leaves room for the translation) and
+//! built in place: a solve starts by clearing a few kilobytes, not tens.
+
+use super::reach::bit;
+use super::slots::{Kind, MAX_GOALS, Slot, Slots};
+use super::{ReachTree, RootMode, SolveError, Solver, Work};
+use crate::body::Axis;
+use crate::goal::Frame;
+use crate::math;
+use glam::{Mat3, Quat, Vec3};
+
+/// Marker for the translation group.
+const TRANSLATION: u8 = u8::MAX;
+/// Marker for a path segment whose joint does not move.
+const FIXED: u8 = u8::MAX;
+
+/// The DOFs of one segment's joint (or the root translation), with the goals
+/// they move and what the solver needs of the joint, copied once.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Group {
+    pub seg: u8,
+    parent: u8,
+    pub count: u8,
+    axes: [Axis; 3],
+    /// First link and number of links.
+    start: u8,
+    len: u8,
+    /// Bit `j`: moves slot `j`'s point.
+    pub dep_a: u16,
+    /// Bit `j`: moves slot `j`'s frame segment.
+    pub dep_b: u16,
+    /// The joint origin in the parent's frame.
+    offset: Vec3,
+    pub min: Vec3,
+    pub max: Vec3,
+    /// Sine and cosine of the first DOF's angle (for the middle axis).
+    turn: (f32, f32),
+}
+
+/// Per group and DOF, at the current linearisation: the curvature `|c|²`,
+/// the gradient `c·r̃` and the tension; the steps that would reach the lower
+/// and upper limits; `1 / D` (0 for a DOF that does not take part) and the
+/// step. And the group's lever: the sum of its goals' `w / w_max`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Dofs {
+    pub curvature: Vec3,
+    pub grad: Vec3,
+    pub tension: Vec3,
+    pub lo: Vec3,
+    pub hi: Vec3,
+    pub inv_d: Vec3,
+    pub delta: Vec3,
+    /// The values before the step.
+    back: Vec3,
+    pub lever: f32,
+}
+
+/// One goal moved by a group, with the group's scaled column per DOF.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Link {
+    pub slot: u8,
+    /// Column `k`: DOF `k`'s derivative of the slot's three rows (zero for a
+    /// DOF the group does not have).
+    pub cols: Mat3,
+}
+
+const NO_GROUP: Group = Group {
+    seg: 0,
+    parent: 0,
+    count: 0,
+    axes: [Axis::X; 3],
+    start: 0,
+    len: 0,
+    dep_a: 0,
+    dep_b: 0,
+    offset: Vec3::ZERO,
+    min: Vec3::ZERO,
+    max: Vec3::ZERO,
+    turn: (0.0, 0.0),
+};
+const NO_DOFS: Dofs = Dofs {
+    curvature: Vec3::ZERO,
+    grad: Vec3::ZERO,
+    tension: Vec3::ZERO,
+    lo: Vec3::ZERO,
+    hi: Vec3::ZERO,
+    inv_d: Vec3::ZERO,
+    delta: Vec3::ZERO,
+    back: Vec3::ZERO,
+    lever: 0.0,
+};
+const NO_LINK: Link = Link {
+    slot: 0,
+    cols: Mat3::ZERO,
+};
+
+impl Group {
+    #[inline]
+    pub fn translation(&self) -> bool {
+        self.seg == TRANSLATION
+    }
+
+    /// The current values of the group's DOFs (zeros for the translation).
+    #[inline]
+    pub fn values<const N: usize>(&self, work: &Work<'_, '_, N>) -> [f32; 3] {
+        if self.translation() {
+            return [0.0; 3];
+        }
+        work.angles
+            .get(usize::from(self.seg))
+            .copied()
+            .unwrap_or([0.0; 3])
+    }
+}
+
+/// The moving joints, their state and their columns.
+pub(super) struct Joints<const N: usize> {
+    pub groups: [Group; N],
+    pub dofs: [Dofs; N],
+    pub links: [[Link; 2]; N],
+    pub count: usize,
+    /// The segments the forward kinematics visits, in order (those that
+    /// carry a goal or a goal's frame, and their ancestors), each with its
+    /// group or [`FIXED`].
+    order: [(u8, u8); N],
+    /// Segments in `order`.
+    nodes: usize,
+    /// Bit `s`: segment `s` is in `order`.
+    path: u64,
+    /// Bit `s`: segment `s`'s joint moves.
+    moving: u64,
+    /// The root position before the step.
+    back_root: Vec3,
+}
+
+impl<const N: usize> Joints<N> {
+    /// No group.
+    pub const EMPTY: Self = Joints {
+        groups: [NO_GROUP; N],
+        dofs: [NO_DOFS; N],
+        links: [[NO_LINK; 2]; N],
+        count: 0,
+        order: [(0, 0); N],
+        nodes: 0,
+        path: 0,
+        moving: 0,
+        back_root: Vec3::ZERO,
+    };
+
+    /// Finds the groups that move for these goals, in segment order (the
+    /// translation first).
+    pub fn init(
+        &mut self,
+        solver: &Solver,
+        tree: &ReachTree<N>,
+        work: &Work<'_, '_, N>,
+        slots: &Slots,
+    ) {
+        let masks = self.slot_masks(tree, work, slots);
+        let deps = |b: u64| {
+            masks
+                .iter()
+                .take(slots.count)
+                .enumerate()
+                .fold((0u16, 0u16), |(a, f), (k, m)| {
+                    (
+                        if m.0 & b != 0 { a | 1 << k } else { a },
+                        if m.1 & b != 0 { f | 1 << k } else { f },
+                    )
+                })
+        };
+        let anchor = match solver.root {
+            RootMode::Float => {
+                let (dep_a, dep_b) = deps(u64::MAX);
+                self.push(Group {
+                    seg: TRANSLATION,
+                    count: 3,
+                    dep_a,
+                    dep_b,
+                    min: Vec3::NEG_INFINITY,
+                    max: Vec3::INFINITY,
+                    ..NO_GROUP
+                });
+                None
+            }
+            RootMode::Fixed => Some(0),
+        };
+        for (s, seg) in work.body.segments.iter().enumerate().skip(1) {
+            if tree.moves(s, anchor) && seg.joint.count() > 0 {
+                let (dep_a, dep_b) = deps(bit(s));
+                let mut g = Group {
+                    seg: u8::try_from(s).unwrap_or(0),
+                    parent: seg.parent,
+                    offset: seg.origin,
+                    dep_a,
+                    dep_b,
+                    ..NO_GROUP
+                };
+                let (mut min, mut max) = ([0.0f32; 3], [0.0f32; 3]);
+                for (((d, a), lo), hi) in seg
+                    .joint
+                    .dofs()
+                    .iter()
+                    .zip(&mut g.axes)
+                    .zip(&mut min)
+                    .zip(&mut max)
+                {
+                    (*a, *lo, *hi) = (d.axis, d.min, d.max);
+                    g.count += 1;
+                }
+                (g.min, g.max) = (Vec3::from_array(min), Vec3::from_array(max));
+                self.push(g);
+                self.moving |= bit(s);
+            }
+        }
+        self.order_path(work.body.len());
+    }
+
+    /// Lists the path segments in order with their groups.
+    fn order_path(&mut self, len: usize) {
+        let mut groups = self.groups.iter().take(self.count).enumerate();
+        for s in (0..len).filter(|&s| self.path & bit(s) != 0) {
+            let group = if self.moving & bit(s) == 0 {
+                FIXED
+            } else {
+                groups
+                    .find(|(_, g)| usize::from(g.seg) == s)
+                    .map_or(FIXED, |(i, _)| u8::try_from(i).unwrap_or(FIXED))
+            };
+            if let Some(o) = self.order.get_mut(self.nodes) {
+                *o = (u8::try_from(s).unwrap_or(0), group);
+                self.nodes += 1;
+            }
+        }
+    }
+
+    /// Per slot, the ancestry of its segment and of its frame segment; the
+    /// union of all of them is the path.
+    fn slot_masks(
+        &mut self,
+        tree: &ReachTree<N>,
+        work: &Work<'_, '_, N>,
+        slots: &Slots,
+    ) -> [(u64, u64); MAX_GOALS] {
+        let mut masks = [(0u64, 0u64); MAX_GOALS];
+        for (m, slot) in masks.iter_mut().zip(slots.iter()) {
+            if let Some(g) = work.goals.get(usize::from(slot.goal)) {
+                let frame = match g.frame {
+                    Frame::World => 0,
+                    Frame::Segment(f) => tree.ancestry(usize::from(f)),
+                };
+                *m = (tree.ancestry(usize::from(g.segment)), frame);
+                self.path |= m.0 | m.1;
+            }
+        }
+        masks
+    }
+
+    fn push(&mut self, g: Group) {
+        if let Some(slot) = self.groups.get_mut(self.count) {
+            *slot = g;
+            self.count += 1;
+        }
+    }
+
+    /// The groups in use.
+    pub fn groups(&self) -> &[Group] {
+        self.groups.get(..self.count).unwrap_or(&[])
+    }
+
+    /// The links of group `g`.
+    pub fn links_of(&self, g: &Group) -> &[Link] {
+        links_of(&self.links, g)
+    }
+
+    /// Keeps the values of the moving DOFs and the root position, to go back
+    /// to with [`Joints::back`].
+    pub fn keep(&mut self, work: &Work<'_, '_, N>) {
+        self.back_root = work.angles.root_position;
+        for (d, g) in self.dofs.iter_mut().zip(&self.groups).take(self.count) {
+            d.back = Vec3::from_array(g.values(work));
+        }
+    }
+
+    /// Goes back to the values [`Joints::keep`] kept.
+    pub fn back(&self, work: &mut Work<'_, '_, N>) {
+        work.angles.root_position = self.back_root;
+        for (d, g) in self.dofs.iter().zip(&self.groups).take(self.count) {
+            if let Some(x) = work.angles.get_mut(usize::from(g.seg)) {
+                *x = d.back.to_array();
+            }
+        }
+    }
+
+    /// The values of the moving DOFs and the root position.
+    pub fn save(&self, work: &Work<'_, '_, N>) -> Saved<N> {
+        let mut out = Saved {
+            root: work.angles.root_position,
+            values: [[0.0; 3]; N],
+        };
+        for (o, g) in out.values.iter_mut().zip(self.groups()) {
+            *o = g.values(work);
+        }
+        out
+    }
+
+    /// Puts back what [`Joints::save`] took.
+    pub fn restore(&self, work: &mut Work<'_, '_, N>, saved: &Saved<N>) {
+        work.angles.root_position = saved.root;
+        for (v, g) in saved.values.iter().zip(self.groups()) {
+            if let Some(x) = work.angles.get_mut(usize::from(g.seg)) {
+                *x = *v;
+            }
+        }
+    }
+}
+
+/// The links of group `g` in the link store.
+#[inline]
+pub(super) fn links_of<'l>(links: &'l [[Link; 2]], g: &Group) -> &'l [Link] {
+    let start = usize::from(g.start);
+    links
+        .as_flattened()
+        .get(start..start + usize::from(g.len))
+        .unwrap_or(&[])
+}
+
+/// The moving joints' values and the root position, to go back to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Saved<const N: usize> {
+    root: Vec3,
+    values: [[f32; 3]; N],
+}
+
+impl<const N: usize> Joints<N> {
+    /// Forward kinematics of the path segments: the moving joints' rotations
+    /// (into the work's local pose) and every path segment's world placement
+    /// (into its pose, exactly as [`crate::pose::forward`] computes it). The
+    /// other segments are left as they are.
+    pub fn forward(&mut self, work: &mut Work<'_, '_, N>) {
+        for &(s, group) in self.order.iter().take(self.nodes) {
+            let s = usize::from(s);
+            let placed = match self.groups.get_mut(usize::from(group)) {
+                Some(g) if group != FIXED => place_moving(work, g),
+                _ => place_fixed(work, s),
+            };
+            if let (Some((p, r)), Some(op), Some(or)) = (
+                placed,
+                work.pose.positions.get_mut(s),
+                work.pose.rotations.get_mut(s),
+            ) {
+                *op = p;
+                *or = r;
+            }
+        }
+    }
+
+    /// The world placement of the segments off the path, from the local
+    /// rotations of the joints that do not move (see
+    /// [`Joints::fixed_rotations`]).
+    pub fn forward_rest(&self, work: &mut Work<'_, '_, N>) {
+        work.pose.count = work.body.len();
+        let mut rest = !self.path & (u64::MAX >> (64 - work.body.len().clamp(1, 64)));
+        while rest != 0 {
+            let s = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            if let (Some(placement), true) = (place_fixed(work, s), s > 0)
+                && let (Some(op), Some(or)) = (
+                    work.pose.positions.get_mut(s),
+                    work.pose.rotations.get_mut(s),
+                )
+            {
+                (*op, *or) = placement;
+            }
+        }
+    }
+
+    /// The local rotations of every segment whose joint does not move.
+    pub fn fixed_rotations(&self, work: &mut Work<'_, '_, N>) {
+        for (i, ((r, v), s)) in work
+            .local
+            .rotations
+            .iter_mut()
+            .zip(&work.angles.values)
+            .zip(work.body.segments)
+            .enumerate()
+        {
+            *r = if i == 0 {
+                work.angles.root_rotation
+            } else if self.moving & bit(i) == 0 {
+                s.joint.rotation(v)
+            } else {
+                continue;
+            };
+        }
+    }
+}
+
+/// The world placement of segment `s` (the root: its own) from its parent's
+/// and its local rotation.
+#[inline]
+fn place_fixed<const N: usize>(work: &Work<'_, '_, N>, s: usize) -> Option<(Vec3, Quat)> {
+    let local = *work.local.rotations.get(s)?;
+    let Some(parent) = work.body.parent(s) else {
+        return Some((work.angles.root_position, local));
+    };
+    let pp = *work.pose.positions.get(parent)?;
+    let rp = *work.pose.rotations.get(parent)?;
+    Some((pp + rp * *work.body.offsets.get(s)?, rp * local))
+}
+
+/// The world placement of a moving group's segment, rebuilding its local
+/// rotation and keeping the sine and cosine of its first angle.
+#[inline]
+fn place_moving<const N: usize>(work: &mut Work<'_, '_, N>, g: &mut Group) -> Option<(Vec3, Quat)> {
+    let s = usize::from(g.seg);
+    let parent = usize::from(g.parent);
+    let pp = *work.pose.positions.get(parent)?;
+    let rp = *work.pose.rotations.get(parent)?;
+    let (lr, (sin, cos)) = local_rotation(&g.axes, g.count, work.angles.get(s)?);
+    *work.local.rotations.get_mut(s)? = lr;
+    g.turn = (2.0 * sin * cos, cos * cos - sin * sin);
+    Some((pp + rp * g.offset, rp * lr))
+}
+
+/// The rotation of a joint with these axes (bit-identical to
+/// [`Joint::rotation`]) and the sine and cosine of half the first angle.
+#[inline]
+fn local_rotation(axes: &[Axis; 3], count: u8, values: &[f32; 3]) -> (Quat, (f32, f32)) {
+    let mut first = (0.0, 1.0);
+    let mut q = Quat::IDENTITY;
+    for (k, (a, &v)) in axes.iter().zip(values).take(usize::from(count)).enumerate() {
+        let (s, c) = math::sin_cos(0.5 * v);
+        q = if k == 0 {
+            first = (s, c);
+            a.rotation_half(s, c)
+        } else {
+            a.rotate_after_half(q, s, c)
+        };
+    }
+    (q, first)
+}
+
+/// Column `axis` of the rotation matrix of `q`: the world direction of that
+/// local axis.
+#[inline]
+fn column(q: Quat, axis: Axis) -> Vec3 {
+    let (x, y, z, w) = (q.x, q.y, q.z, q.w);
+    match axis {
+        Axis::X => Vec3::new(
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y + w * z),
+            2.0 * (x * z - w * y),
+        ),
+        Axis::Y => Vec3::new(
+            2.0 * (x * y - w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z + w * x),
+        ),
+        Axis::Z => Vec3::new(
+            2.0 * (x * z + w * y),
+            2.0 * (y * z - w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ),
+    }
+}
+
+/// World axes of a group's DOFs from the parent's and the segment's world
+/// rotations: the axis of DOF `k` is `R_parent · R_0 ⋯ R_{k−1} · axis_k`; the
+/// first is `R_parent · axis_0`, the last `R_segment · axis_last`, a middle
+/// one `R_parent · (cos θ₀·b + sin θ₀·a × b)`.
+fn world_axes(g: &Group, rp: Quat, rs: Quat) -> [Vec3; 3] {
+    let [a, b, c] = g.axes;
+    match g.count {
+        1 => [column(rs, a), Vec3::ZERO, Vec3::ZERO],
+        2 => [column(rp, a), column(rs, b), Vec3::ZERO],
+        3 => {
+            let (sin, cos) = g.turn;
+            let cyclic = matches!(
+                (a, b),
+                (Axis::X, Axis::Y) | (Axis::Y, Axis::Z) | (Axis::Z, Axis::X)
+            );
+            let sin = if cyclic { sin } else { -sin };
+            let middle = column(rp, b) * cos + column(rp, a.third(b)) * sin;
+            [column(rp, a), middle, column(rs, c)]
+        }
+        _ => [Vec3::ZERO; 3],
+    }
+}
+
+impl<const N: usize> Joints<N> {
+    /// Builds every group's links and columns at the current pose; each DOF's
+    /// curvature, gradient and tension (from the goals the last step did not
+    /// bring much closer), and the steps to its limits.
+    pub fn linearise(&mut self, work: &Work<'_, '_, N>, slots: &Slots) -> Result<(), SolveError> {
+        let mut used = 0usize;
+        let links = self.links.as_flattened_mut();
+        for (g, d) in self
+            .groups
+            .iter_mut()
+            .zip(self.dofs.iter_mut())
+            .take(self.count)
+        {
+            let (p, axes) = geometry(work, g);
+            *d = Dofs {
+                lo: g.min - Vec3::from_array(g.values(work)),
+                hi: g.max - Vec3::from_array(g.values(work)),
+                ..NO_DOFS
+            };
+            g.start = u8::try_from(used).map_err(|_| SolveError::TooManyGoals)?;
+            let mut bits = g.dep_a | g.dep_b;
+            while bits != 0 {
+                let j = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let Some(slot) = slots.s.get(j) else { continue };
+                let (da, db) = (g.dep_a >> j & 1 != 0, g.dep_b >> j & 1 != 0);
+                let (cols, t) = columns(slot, da, db, g.translation(), &axes, p);
+                let link = Link {
+                    slot: u8::try_from(j).unwrap_or(0),
+                    cols: cols * slot.sw,
+                };
+                if slot.awake {
+                    d.add(&link, slot.r * slot.sw, slot.sw * slot.sw);
+                    if slot.stretched {
+                        d.tension += t * (slot.sw * slot.sw);
+                    }
+                }
+                *links.get_mut(used).ok_or(SolveError::TooManyGoals)? = link;
+                used += 1;
+            }
+            g.len = u8::try_from(used - usize::from(g.start)).unwrap_or(0);
+            d.tension = d.tension.max(Vec3::ZERO);
+        }
+        Ok(())
+    }
+
+    /// Recomputes every DOF's curvature and gradient for these awake slots
+    /// and scaled residuals (after standby planes woke).
+    pub fn sums(&mut self, slots: &Slots, awake: u16, r: &[Vec3]) {
+        for (g, d) in self
+            .groups
+            .iter()
+            .zip(self.dofs.iter_mut())
+            .take(self.count)
+        {
+            (d.curvature, d.grad, d.lever) = (Vec3::ZERO, Vec3::ZERO, 0.0);
+            for l in links_of(&self.links, g)
+                .iter()
+                .filter(|l| awake >> l.slot & 1 != 0)
+            {
+                let j = usize::from(l.slot);
+                let rj = r.get(j).copied().unwrap_or(Vec3::ZERO);
+                let sw = slots.s.get(j).map_or(0.0, |s| s.sw);
+                d.add(l, rj, sw * sw);
+            }
+        }
+    }
+}
+
+impl Dofs {
+    /// Adds a link's curvature, gradient (for scaled residual `r`) and lever
+    /// (its slot's `w / w_max`).
+    #[inline]
+    fn add(&mut self, l: &Link, r: Vec3, sw2: f32) {
+        let c = l.cols;
+        self.curvature += Vec3::new(
+            c.x_axis.length_squared(),
+            c.y_axis.length_squared(),
+            c.z_axis.length_squared(),
+        );
+        self.grad += c.transpose() * r;
+        self.lever += sw2;
+    }
+}
+
+/// The pivot and world axes of a group at the current pose (the translation's
+/// axes are its directions).
+pub(super) fn geometry<const N: usize>(work: &Work<'_, '_, N>, g: &Group) -> (Vec3, [Vec3; 3]) {
+    let s = usize::from(g.seg);
+    let poses = (
+        work.pose.positions.get(s),
+        work.pose.rotations.get(usize::from(g.parent)),
+        work.pose.rotations.get(s),
+    );
+    match poses {
+        (Some(&p), Some(&rp), Some(&rs)) if !g.translation() => (p, world_axes(g, rp, rs)),
+        _ => (Vec3::ZERO, [Vec3::X, Vec3::Y, Vec3::Z]),
+    }
+}
+
+/// The unscaled derivatives of a slot's rows with respect to a group's DOFs
+/// (world axes `w`, pivot `p`; for the translation the axes are its
+/// directions), given which of the point (`da`) and the frame (`db`) the
+/// group moves; and per DOF the tension: for a goal pulling its point `x`
+/// with residual `r`, `r · (x − p)⊥ω`, the diagonal of the second-order term
+/// that makes a stretched limb stiff against turning.
+#[inline]
+fn columns(
+    slot: &Slot,
+    da: bool,
+    db: bool,
+    translation: bool,
+    w: &[Vec3; 3],
+    p: Vec3,
+) -> (Mat3, Vec3) {
+    let [w0, w1, w2] = *w;
+    let (x, g, n, r) = (slot.x, slot.g, slot.n, slot.r);
+    let dots = |v: Vec3| Vec3::new(w0.dot(v), w1.dot(v), w2.dot(v));
+    match (slot.kind, translation) {
+        (Kind::Point, true) => (if db { Mat3::ZERO } else { Mat3::IDENTITY }, Vec3::ZERO),
+        (Kind::Point, false) => {
+            let a = if da { x - p } else { Vec3::ZERO };
+            let arm = if db { a - (g - p) } else { a };
+            let cols = Mat3::from_cols(w0.cross(arm), w1.cross(arm), w2.cross(arm));
+            (cols, Vec3::splat(r.dot(arm)) - dots(r) * dots(arm))
+        }
+        (Kind::Plane, true) if !db => (plane_rows(n), Vec3::ZERO),
+        (Kind::Plane, false) if !db => {
+            let arm = x - p;
+            let tension = (Vec3::splat(n.dot(arm)) - dots(n) * dots(arm)) * r.x;
+            (plane_rows(dots(arm.cross(n))), tension)
+        }
+        (Kind::Plane, _) => {
+            let j = |w: Vec3| entry(slot, da, db, translation, w, p).x;
+            (plane_rows(Vec3::new(j(w0), j(w1), j(w2))), Vec3::ZERO)
+        }
+        (Kind::Orientation, true) => (Mat3::ZERO, Vec3::ZERO),
+        (Kind::Orientation, false) => {
+            let k = if da { 1.0 } else { 0.0 } - if db { 1.0 } else { 0.0 };
+            (Mat3::from_cols(w0, w1, w2) * k, Vec3::ZERO)
+        }
+    }
+}
+
+/// A matrix whose first row is `v` (a plane's one row), the others zero.
+#[inline]
+fn plane_rows(v: Vec3) -> Mat3 {
+    Mat3::from_cols(
+        Vec3::new(v.x, 0.0, 0.0),
+        Vec3::new(v.y, 0.0, 0.0),
+        Vec3::new(v.z, 0.0, 0.0),
+    )
+}
+
+/// The unscaled derivative of a slot's rows with respect to one DOF with world
+/// axis `w` and pivot `p` (for a translation, `w` is its direction), given
+/// which of the point (`da`) and the frame (`db`) it moves.
+pub(super) fn entry(slot: &Slot, da: bool, db: bool, translation: bool, w: Vec3, p: Vec3) -> Vec3 {
+    let (x, g, n) = (slot.x, slot.g, slot.n);
+    match (slot.kind, translation) {
+        (Kind::Point, true) => {
+            if db {
+                Vec3::ZERO
+            } else {
+                w
+            }
+        }
+        (Kind::Point, false) => {
+            let a = if da { w.cross(x - p) } else { Vec3::ZERO };
+            let b = if db { w.cross(g - p) } else { Vec3::ZERO };
+            a - b
+        }
+        (Kind::Plane, true) => Vec3::new(if db { 0.0 } else { n.dot(w) }, 0.0, 0.0),
+        (Kind::Plane, false) => {
+            let mut j = if da { n.dot(w.cross(x - p)) } else { 0.0 };
+            if db {
+                j += w.cross(n).dot(x - g) - n.dot(w.cross(g - p));
+            }
+            Vec3::new(j, 0.0, 0.0)
+        }
+        (Kind::Orientation, true) => Vec3::ZERO,
+        (Kind::Orientation, false) => {
+            (if da { w } else { Vec3::ZERO }) - (if db { w } else { Vec3::ZERO })
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::{Angles, cmu};
+    use crate::goal::Goal;
+    use crate::pose::{LocalPose, Pose};
+
+    /// Every column against a central difference of the forward kinematics.
+    #[test]
+    fn columns_match_finite_differences() {
+        let body = cmu::BODY;
+        let mut a = Angles::<32>::rest(&body).unwrap();
+        for (i, v) in a.values.iter_mut().flat_map(|v| v.iter_mut()).enumerate() {
+            *v = 0.3 * ((i as f32) * 0.7).sin();
+        }
+        a.clamp_to_limits(&body);
+        let goals = [
+            Goal::reach(cmu::index::LEFT_HAND, Vec3::new(0.3, 1.0, 0.2), 1.0),
+            Goal::reach(cmu::index::RIGHT_FOOT, Vec3::new(-0.1, 0.0, 0.1), 4.0),
+        ];
+        let mut pose = Pose::<32>::default();
+        let mut angles = a;
+        let mut work = Work::new(&body, &goals, &mut angles, &mut pose);
+        work.check().unwrap();
+        let tree = ReachTree::<32>::build(&body, &goals).unwrap();
+        let mut slots = Slots::EMPTY;
+        slots.init(&goals, 4.0).unwrap();
+        let mut joints = Joints::<32>::EMPTY;
+        joints.init(&Solver::DEFAULT, &tree, &work, &slots);
+        joints.fixed_rotations(&mut work);
+        joints.forward(&mut work);
+        slots.evaluate(&work).unwrap();
+        joints.linearise(&work, &slots).unwrap();
+        let point = |a: &Angles<32>, g: &Goal| {
+            let (mut l, mut p) = (LocalPose::<32>::default(), Pose::<32>::default());
+            a.forward(&body, &mut l, &mut p).unwrap();
+            g.world_point(&body, &p).unwrap()
+        };
+        let mut checked = 0;
+        for g in joints.groups() {
+            for l in joints.links_of(g) {
+                let slot = slots.s[usize::from(l.slot)];
+                let goal = &goals[usize::from(slot.goal)];
+                for k in 0..usize::from(g.count) {
+                    let h = 1e-3;
+                    let (mut p, mut m) = (a, a);
+                    p.values[usize::from(g.seg)][k] += h;
+                    m.values[usize::from(g.seg)][k] -= h;
+                    let fd = (point(&p, goal) - point(&m, goal)) / (2.0 * h) * slot.sw;
+                    let col = l.cols.col(k);
+                    assert!(
+                        (fd - col).length() < 1e-3,
+                        "seg {} dof {k}: {fd} vs {col}",
+                        g.seg
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 20, "{checked}");
+    }
+}
