@@ -1134,8 +1134,22 @@ impl Trilinear {
         rotations: &mut [Quat],
     ) -> Result<(), GridError> {
         let all = positions.iter_mut().zip(rotations.iter_mut());
+        let blends = self.slerp.iter().all(SlerpWeight::is_blend);
+        if S::DECODES {
+            // The whole window first (one copy of the decoder), then the tree.
+            for (seg, (p, r)) in all.enumerate() {
+                let (pos, q) = self.fetch(samples, seg)?;
+                let [x, y, z, w] = if blends {
+                    self.tree_blend(q)
+                } else {
+                    self.tree(q)
+                };
+                (*p, *r) = (pos, Quat::from_xyzw(x, y, z, w));
+            }
+            return Ok(());
+        }
         let rows = self.index.map(|i| samples.row(i as usize));
-        if self.slerp.iter().all(SlerpWeight::is_blend) && rows.iter().all(Option::is_some) {
+        if blends && rows.iter().all(Option::is_some) {
             // In memory: the window's rows once, then one check per read.
             let rows = rows.map(|r| r.unwrap_or((&[], &[])));
             for (seg, (p, r)) in all.enumerate() {
@@ -1144,9 +1158,12 @@ impl Trilinear {
                     Some((*ps.get(seg)?, *qs.get(seg)?))
                 })?;
             }
-        } else if self.slerp.iter().all(SlerpWeight::is_blend) {
+        } else if blends {
             for (seg, (p, r)) in all.enumerate() {
-                (*p, *r) = self.segment_blend(samples, seg)?;
+                (*p, *r) = self.segment_blend_by(|j| {
+                    let &index = self.index.get(j)?;
+                    samples.sample(index as usize, seg)
+                })?;
             }
         } else {
             for (seg, (p, r)) in all.enumerate() {
@@ -1156,33 +1173,21 @@ impl Trilinear {
         Ok(())
     }
 
-    /// One segment when every level blends (a query inside a cell, the
-    /// usual case): the same operations as [`Trilinear::segment`] without
-    /// the endpoint checks. Samples that decode are all read first
-    /// ([`Samples::DECODES`]); others are blended pair by pair as they are
-    /// read.
+    /// [`Trilinear::tree`] when every level blends (a query inside a
+    /// cell, the usual case): the same operations without the endpoint
+    /// checks.
     #[inline(always)]
-    fn segment_blend<S: Samples>(
-        &self,
-        samples: &S,
-        segment: usize,
-    ) -> Result<(Vec3, Quat), GridError> {
-        if S::DECODES {
-            let [x, y, z] = &self.slerp;
-            let (p, [q0, q1, q2, q3, q4, q5, q6, q7]) = self.fetch(samples, segment)?;
-            let ab = y.blend(x.blend(q0, q1), x.blend(q2, q3));
-            let cd = y.blend(x.blend(q4, q5), x.blend(q6, q7));
-            let [rx, ry, rz, rw] = math::renormalize_lanes(z.blend(ab, cd));
-            return Ok((p, Quat::from_xyzw(rx, ry, rz, rw)));
-        }
-        self.segment_blend_by(|j| {
-            let &index = self.index.get(j)?;
-            samples.sample(index as usize, segment)
-        })
+    fn tree_blend(&self, q: [[f32; 4]; 8]) -> [f32; 4] {
+        let [q0, q1, q2, q3, q4, q5, q6, q7] = q;
+        let [x, y, z] = &self.slerp;
+        let ab = y.blend(x.blend(q0, q1), x.blend(q2, q3));
+        let cd = y.blend(x.blend(q4, q5), x.blend(q6, q7));
+        math::renormalize_lanes(z.blend(ab, cd))
     }
 
-    /// [`Trilinear::segment_blend`] pair by pair, window sample `j` read by
-    /// `read(j)`.
+    /// One segment when every level blends, each pair blended as soon as
+    /// it is read (window sample `j` by `read(j)`): the operations of
+    /// [`Trilinear::tree_blend`], in another order.
     #[inline(always)]
     fn segment_blend_by(
         &self,
@@ -1361,11 +1366,10 @@ impl Plan {
         first: usize,
         out: (&mut [Vec3], &mut [Quat]),
     ) -> Result<(), GridError> {
+        // Two buffer sizes only: every instance is a copy of the loop (and of
+        // an inlined sample decoder), which costs flash.
         match self.window.len {
-            0..=2 => self.scalar::<S, 2>(samples, first, out),
-            3..=4 => self.scalar::<S, 4>(samples, first, out),
-            5..=8 => self.scalar::<S, 8>(samples, first, out),
-            9..=16 => self.scalar::<S, 16>(samples, first, out),
+            0..=16 => self.scalar::<S, 16>(samples, first, out),
             _ => self.scalar::<S, MAX_WINDOW>(samples, first, out),
         }
     }
