@@ -59,7 +59,7 @@ fn prints_a_summary_without_json() {
 }
 
 #[test]
-fn bad_input_exits_non_zero_naming_the_field() {
+fn bad_input_exits_non_zero_naming_the_line_and_field() {
     let out = run(
         r#"{"goals": [{"segment": "l_hand", "target": [0, 0, 0], "weight": 1}]}"#,
         &["--json"],
@@ -68,7 +68,7 @@ fn bad_input_exits_non_zero_naming_the_field() {
     assert!(out.stdout.is_empty());
     let err = String::from_utf8(out.stderr).unwrap();
     assert!(
-        err.contains("goals.json: goals[0].segment: unknown segment \"l_hand\""),
+        err.contains("goals.json:1: goals[0].segment: unknown segment \"l_hand\""),
         "{err}"
     );
     let out = run("{\"goals\": [\n  {\"segment\": 1,}\n]}", &[]);
