@@ -344,10 +344,9 @@ pub(super) struct Saved<const N: usize> {
 }
 
 impl<const N: usize> Joints<N> {
-    /// Forward kinematics of the path segments: the moving joints' rotations
-    /// (into the work's local pose) and every path segment's world placement
-    /// (into its pose, exactly as [`crate::pose::forward`] computes it). The
-    /// other segments are left as they are.
+    /// Forward kinematics of the path segments: every path segment's world
+    /// placement (into the work's pose, exactly as [`crate::pose::forward`]
+    /// computes it). The other segments are left as they are.
     pub fn forward(&mut self, work: &mut Work<'_, '_, N>) {
         for &(s, group) in self.order.iter().take(self.nodes) {
             let s = usize::from(s);
@@ -366,9 +365,7 @@ impl<const N: usize> Joints<N> {
         }
     }
 
-    /// The world placement of the segments off the path, from the local
-    /// rotations of the joints that do not move (see
-    /// [`Joints::fixed_rotations`]).
+    /// The world placement of the segments off the path.
     pub fn forward_rest(&self, work: &mut Work<'_, '_, N>) {
         work.pose.count = work.body.len();
         let mut rest = !self.path & (u64::MAX >> (64 - work.body.len().clamp(1, 64)));
@@ -385,36 +382,16 @@ impl<const N: usize> Joints<N> {
             }
         }
     }
-
-    /// The local rotations of every segment whose joint does not move.
-    pub fn fixed_rotations(&self, work: &mut Work<'_, '_, N>) {
-        for (i, ((r, v), s)) in work
-            .local
-            .rotations
-            .iter_mut()
-            .zip(&work.angles.values)
-            .zip(work.body.segments)
-            .enumerate()
-        {
-            *r = if i == 0 {
-                work.angles.root_rotation
-            } else if self.moving & bit(i) == 0 {
-                s.joint.rotation(v)
-            } else {
-                continue;
-            };
-        }
-    }
 }
 
 /// The world placement of segment `s` (the root: its own) from its parent's
-/// and its local rotation.
+/// and its joint's rotation at the current angles.
 #[inline]
 fn place_fixed<const N: usize>(work: &Work<'_, '_, N>, s: usize) -> Option<(Vec3, Quat)> {
-    let local = *work.local.rotations.get(s)?;
     let Some(parent) = work.body.parent(s) else {
-        return Some((work.angles.root_position, local));
+        return Some((work.angles.root_position, work.angles.root_rotation));
     };
+    let local = work.body.segment(s)?.joint.rotation(work.angles.get(s)?);
     let pp = *work.pose.positions.get(parent)?;
     let rp = *work.pose.rotations.get(parent)?;
     Some((pp + rp * *work.body.offsets.get(s)?, rp * local))
@@ -429,7 +406,6 @@ fn place_moving<const N: usize>(work: &mut Work<'_, '_, N>, g: &mut Group) -> Op
     let pp = *work.pose.positions.get(parent)?;
     let rp = *work.pose.rotations.get(parent)?;
     let (lr, (sin, cos)) = local_rotation(&g.axes, g.count, work.angles.get(s)?);
-    *work.local.rotations.get_mut(s)? = lr;
     g.turn = (2.0 * sin * cos, cos * cos - sin * sin);
     Some((pp + rp * g.offset, rp * lr))
 }
@@ -513,9 +489,10 @@ impl<const N: usize> Joints<N> {
             .take(self.count)
         {
             let (p, axes) = geometry(work, g);
+            let v = Vec3::from_array(g.values(work));
             *d = Dofs {
-                lo: g.min - Vec3::from_array(g.values(work)),
-                hi: g.max - Vec3::from_array(g.values(work)),
+                lo: g.min - v,
+                hi: g.max - v,
                 ..NO_DOFS
             };
             g.start = u8::try_from(used).map_err(|_| SolveError::TooManyGoals)?;
@@ -532,9 +509,7 @@ impl<const N: usize> Joints<N> {
                 };
                 if slot.awake {
                     d.add(&link, slot.r * slot.sw, slot.sw * slot.sw);
-                    if slot.stretched {
-                        d.tension += t * (slot.sw * slot.sw);
-                    }
+                    d.tension += t * (slot.sw * slot.sw);
                 }
                 *links.get_mut(used).ok_or(SolveError::TooManyGoals)? = link;
                 used += 1;
@@ -602,9 +577,10 @@ pub(super) fn geometry<const N: usize>(work: &Work<'_, '_, N>, g: &Group) -> (Ve
 /// The unscaled derivatives of a slot's rows with respect to a group's DOFs
 /// (world axes `w`, pivot `p`; for the translation the axes are its
 /// directions), given which of the point (`da`) and the frame (`db`) the
-/// group moves; and per DOF the tension: for a goal pulling its point `x`
-/// with residual `r`, `r · (x − p)⊥ω`, the diagonal of the second-order term
-/// that makes a stretched limb stiff against turning.
+/// group moves; and per DOF the tension (zero unless the goal is marked
+/// stretched): for a goal pulling its point `x` with residual `r`,
+/// `r · (x − p)⊥ω`, the diagonal of the second-order term that makes a
+/// stretched limb stiff against turning.
 #[inline]
 fn columns(
     slot: &Slot,
@@ -617,19 +593,26 @@ fn columns(
     let [w0, w1, w2] = *w;
     let (x, g, n, r) = (slot.x, slot.g, slot.n, slot.r);
     let dots = |v: Vec3| Vec3::new(w0.dot(v), w1.dot(v), w2.dot(v));
+    let stretched = slot.stretched;
     match (slot.kind, translation) {
         (Kind::Point, true) => (if db { Mat3::ZERO } else { Mat3::IDENTITY }, Vec3::ZERO),
         (Kind::Point, false) => {
             let a = if da { x - p } else { Vec3::ZERO };
             let arm = if db { a - (g - p) } else { a };
             let cols = Mat3::from_cols(w0.cross(arm), w1.cross(arm), w2.cross(arm));
+            if !stretched {
+                return (cols, Vec3::ZERO);
+            }
             (cols, Vec3::splat(r.dot(arm)) - dots(r) * dots(arm))
         }
         (Kind::Plane, true) if !db => (plane_rows(n), Vec3::ZERO),
         (Kind::Plane, false) if !db => {
             let arm = x - p;
-            let tension = (Vec3::splat(n.dot(arm)) - dots(n) * dots(arm)) * r.x;
-            (plane_rows(dots(arm.cross(n))), tension)
+            let rows = plane_rows(dots(arm.cross(n)));
+            if !stretched {
+                return (rows, Vec3::ZERO);
+            }
+            (rows, (Vec3::splat(n.dot(arm)) - dots(n) * dots(arm)) * r.x)
         }
         (Kind::Plane, _) => {
             let j = |w: Vec3| entry(slot, da, db, translation, w, p).x;
@@ -715,7 +698,6 @@ mod tests {
         slots.init(&goals, 4.0).unwrap();
         let mut joints = Joints::<32>::EMPTY;
         joints.init(&Solver::DEFAULT, &tree, &work, &slots);
-        joints.fixed_rotations(&mut work);
         joints.forward(&mut work);
         slots.evaluate(&work).unwrap();
         joints.linearise(&work, &slots).unwrap();

@@ -333,7 +333,8 @@ pub(crate) struct Work<'w, 'b, const N: usize> {
     pub goals: &'w [Goal],
     pub angles: &'w mut Angles<N>,
     pub pose: &'w mut Pose<N>,
-    local: LocalPose<N>,
+    /// Scratch of [`Work::forward`], made on first use.
+    local: Option<LocalPose<N>>,
 }
 
 impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
@@ -349,7 +350,7 @@ impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
             goals,
             angles,
             pose,
-            local: LocalPose::default(),
+            local: None,
         }
     }
 
@@ -387,7 +388,8 @@ impl<'w, 'b, const N: usize> Work<'w, 'b, N> {
 
     /// Recomputes the world pose from the angles (the one forward kinematics).
     pub fn forward(&mut self) -> Result<(), SolveError> {
-        self.angles.forward(self.body, &mut self.local, self.pose)?;
+        let local = self.local.get_or_insert_with(LocalPose::default);
+        self.angles.forward(self.body, local, self.pose)?;
         Ok(())
     }
 

@@ -42,9 +42,15 @@ const BLOCKS: usize = MAX_GOALS * (MAX_GOALS + 1) / 2;
 pub(super) struct System {
     a: [Mat3; BLOCKS],
     l: [Mat3; BLOCKS],
+    /// Bit `s` of entry `t`: block `(t, s)` of the factor may be nonzero
+    /// (the goals share a moving joint, or fill-in).
+    coupled: Coupling,
     /// Bit `j`: slot `j` takes part.
     awake: u16,
 }
+
+/// Per block row, the blocks that may be nonzero.
+type Coupling = [u16; MAX_GOALS];
 
 /// The index of block `(t, s)`, `s ≤ t`.
 #[inline]
@@ -57,6 +63,7 @@ impl System {
     pub const EMPTY: Self = System {
         a: [Mat3::ZERO; BLOCKS],
         l: [Mat3::ZERO; BLOCKS],
+        coupled: [0; MAX_GOALS],
         awake: 0,
     };
 
@@ -98,7 +105,7 @@ impl System {
                 *l = *a;
             }
             let mut y = target;
-            if !block_cholesky_solve(&mut self.l, n, &mut y) {
+            if !block_cholesky_solve(&mut self.l, &self.coupled, n, &mut y) {
                 return false;
             }
             let last = pass + 1 == CLAMP_PASSES;
@@ -118,9 +125,13 @@ impl System {
                 }
             }
         }
+        self.coupled = [0; MAX_GOALS];
         for (g, d) in joints.groups().iter().zip(&joints.dofs) {
-            outer(&mut self.a, joints.links_of(g), self.awake, d.inv_d);
+            let links = joints.links_of(g);
+            outer(&mut self.a, links, self.awake, d.inv_d);
+            couple(&mut self.coupled, links, self.awake);
         }
+        fill_in(&mut self.coupled, n);
     }
 
     /// Wakes every standby plane whose point the step would carry through the
@@ -261,6 +272,37 @@ fn spread<const N: usize>(
     clamped
 }
 
+/// Marks the blocks that a group's links to awake slots make nonzero.
+fn couple(coupled: &mut Coupling, links: &[Link], awake: u16) {
+    let mask = links
+        .iter()
+        .filter(|l| awake >> l.slot & 1 != 0)
+        .fold(0u16, |m, l| m | 1 << l.slot);
+    for l in links.iter().filter(|l| awake >> l.slot & 1 != 0) {
+        if let Some(c) = coupled.get_mut(usize::from(l.slot)) {
+            // The lower triangle: slots up to this one.
+            *c |= mask & ((2u16 << l.slot) - 1);
+        }
+    }
+}
+
+/// Adds the fill-in of the factorisation: `L_ts` may be nonzero if some
+/// `k < s` has both `L_tk` and `L_sk` nonzero.
+fn fill_in(coupled: &mut Coupling, n: usize) {
+    for t in 0..n {
+        for s in 0..t {
+            let (Some(&ct), Some(&cs)) = (coupled.get(t), coupled.get(s)) else {
+                continue;
+            };
+            if ct & cs & ((1u16 << s) - 1) != 0
+                && let Some(c) = coupled.get_mut(t)
+            {
+                *c |= 1 << s;
+            }
+        }
+    }
+}
+
 /// `a += C_t·diag(d)·C_sᵀ` on the lower block triangle, for every pair of a
 /// group's links to awake slots (links ascend by slot).
 #[inline]
@@ -319,27 +361,33 @@ fn chol3_inverse(m: Mat3) -> Option<Mat3> {
 }
 
 /// Solves `A·y = b` for the packed lower block triangle `a` (`n` block
-/// rows), overwriting `a` with the factor (inverse diagonal blocks) and `b`
-/// with `y`. False if `A` is not numerically positive definite.
-fn block_cholesky_solve(a: &mut [Mat3], n: usize, b: &mut Rhs) -> bool {
+/// rows, only the blocks marked in `coupled` nonzero), overwriting `a` with
+/// the factor (inverse diagonal blocks) and `b` with `y`. False if `A` is not
+/// numerically positive definite.
+fn block_cholesky_solve(a: &mut [Mat3], coupled: &Coupling, n: usize, b: &mut Rhs) -> bool {
     let n = n.min(MAX_GOALS);
     for s in 0..n {
         let Some((done, rest)) = a.split_at_mut_checked(at(s, 0)) else {
             return false;
         };
-        let Some(row_s) = rest.get_mut(..=s) else {
+        let (Some(row_s), Some(&cs)) = (rest.get_mut(..=s), coupled.get(s)) else {
             return false;
         };
         // Off-diagonal blocks of row s: L_sk = (A_sk − Σ_{j<k} L_sj·L_kjᵀ)·L_kk⁻ᵀ.
-        for k in 0..s {
-            let (Some(row_k), Some((left, tail))) =
-                (done.get(at(k, 0)..=at(k, k)), row_s.split_at_mut_checked(k))
-            else {
+        for k in (0..s).filter(|&k| cs >> k & 1 != 0) {
+            let (Some(row_k), Some((left, tail)), Some(&ck)) = (
+                done.get(at(k, 0)..=at(k, k)),
+                row_s.split_at_mut_checked(k),
+                coupled.get(k),
+            ) else {
                 return false;
             };
             let mut acc = tail.first().copied().unwrap_or(Mat3::ZERO);
-            for (lsj, lkj) in left.iter().zip(row_k) {
-                acc -= *lsj * lkj.transpose();
+            let both = cs & ck;
+            for (j, (lsj, lkj)) in left.iter().zip(row_k).enumerate() {
+                if both >> j & 1 != 0 {
+                    acc -= *lsj * lkj.transpose();
+                }
             }
             let inv_kk = row_k.last().copied().unwrap_or(Mat3::ZERO);
             if let Some(x) = tail.first_mut() {
@@ -351,34 +399,45 @@ fn block_cholesky_solve(a: &mut [Mat3], n: usize, b: &mut Rhs) -> bool {
             return false;
         };
         let mut acc = *x;
-        for l in left.iter() {
-            acc -= *l * l.transpose();
+        for (k, l) in left.iter().enumerate() {
+            if cs >> k & 1 != 0 {
+                acc -= *l * l.transpose();
+            }
         }
         let Some(inv) = chol3_inverse(acc) else {
             return false;
         };
         *x = inv;
     }
-    // L·z = b.
+    substitute(a, coupled, n, b)
+}
+
+/// `L·z = b`, then `Lᵀ·y = z`, for the factor of [`block_cholesky_solve`].
+fn substitute(a: &[Mat3], coupled: &Coupling, n: usize, b: &mut Rhs) -> bool {
     for s in 0..n {
-        let (Some(row), Some((head, tail))) =
-            (a.get(at(s, 0)..=at(s, s)), b.split_at_mut_checked(s))
-        else {
+        let (Some(row), Some((head, tail)), Some(&cs)) = (
+            a.get(at(s, 0)..=at(s, s)),
+            b.split_at_mut_checked(s),
+            coupled.get(s),
+        ) else {
             return false;
         };
         let mut v = tail.first().copied().unwrap_or(Vec3::ZERO);
-        for (l, z) in row.iter().zip(head.iter()) {
-            v -= *l * *z;
+        for (k, (l, z)) in row.iter().zip(head.iter()).enumerate() {
+            if cs >> k & 1 != 0 {
+                v -= *l * *z;
+            }
         }
         if let (Some(x), Some(inv)) = (tail.first_mut(), row.last()) {
             *x = *inv * v;
         }
     }
-    // Lᵀ·y = z, by rows of L.
     for s in (0..n).rev() {
-        let (Some(row), Some((head, tail))) =
-            (a.get(at(s, 0)..=at(s, s)), b.split_at_mut_checked(s))
-        else {
+        let (Some(row), Some((head, tail)), Some(&cs)) = (
+            a.get(at(s, 0)..=at(s, s)),
+            b.split_at_mut_checked(s),
+            coupled.get(s),
+        ) else {
             return false;
         };
         let (Some(x), Some(inv)) = (tail.first_mut(), row.last()) else {
@@ -386,8 +445,10 @@ fn block_cholesky_solve(a: &mut [Mat3], n: usize, b: &mut Rhs) -> bool {
         };
         *x = inv.transpose() * *x;
         let ys = *x;
-        for (bk, l) in head.iter_mut().zip(row.iter()) {
-            *bk -= l.transpose() * ys;
+        for (k, (bk, l)) in head.iter_mut().zip(row.iter()).enumerate() {
+            if cs >> k & 1 != 0 {
+                *bk -= l.transpose() * ys;
+            }
         }
     }
     true
@@ -418,7 +479,12 @@ mod tests {
         let mut y: Rhs = [Vec3::ZERO; MAX_GOALS];
         y[0] = b0;
         y[1] = b1;
-        assert!(block_cholesky_solve(&mut a, 2, &mut y));
+        assert!(block_cholesky_solve(
+            &mut a,
+            &[0b01, 0b11, 0, 0, 0, 0, 0, 0, 0, 0],
+            2,
+            &mut y
+        ));
         let r0 = a00 * y[0] + a10.transpose() * y[1] - b0;
         let r1 = a10 * y[0] + a11 * y[1] - b1;
         assert!(r0.length() < 1e-5 && r1.length() < 1e-5, "{r0} {r1}");

@@ -25,7 +25,6 @@
 //! solve is repeated from the rest pose and from poses spread over the moving
 //! joints' ranges, and the lowest error wins.
 
-use super::dls::MAX_STEP;
 use super::joints::Joints;
 use super::slots::Slots;
 use super::system::System;
@@ -38,6 +37,8 @@ pub use super::slots::MAX_GOALS;
 const MIN_DAMPING: f32 = 1e-2;
 /// Beyond this damping a step is pointless: the error is at a minimum.
 const MAX_DAMPING: f32 = 100.0;
+/// The largest turn (rad) or translation (m) of one step.
+const MAX_STEP: f32 = 1.0;
 
 /// The state of one whole-tree solve, built in place.
 struct Lm<const N: usize> {
@@ -69,7 +70,6 @@ pub(super) fn solve<const N: usize>(
     };
     lm.slots.init(work.goals, wmax)?;
     lm.joints.init(solver, tree, work, &lm.slots);
-    lm.joints.fixed_rotations(work);
     let (mut iterations, mut converged) = lm.run(solver, work)?;
     let tol2 = solver.tolerance * solver.tolerance;
     if solver.restarts > 0 && lm.slots.worst > tol2 {
@@ -77,8 +77,6 @@ pub(super) fn solve<const N: usize>(
         iterations += it;
         converged &= conv;
     }
-    work.local.count = work.body.len();
-    work.local.root_position = work.angles.root_position;
     lm.joints.forward_rest(work);
     Ok((iterations, converged))
 }
