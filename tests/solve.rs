@@ -558,55 +558,82 @@ fn reference_optimum(
 }
 
 /// ≥100 random goal sets on the CMU skeleton, started from a "synthesized" pose
-/// (the generating pose with every DOF moved up to ±0.3 rad):
+/// (the generating pose with every DOF moved up to ±0.3 rad), solved with
+/// restarts (the problem is not convex: a local method started from a
+/// synthesized pose can settle in a worse basin, which the reference's random
+/// starts then find):
 ///
-/// - local optimality, every set: the reference optimiser started from the
-///   solver's answer cannot lower its weighted error by more than 2%;
-/// - global: the solver is within 2% of the best reference run (from the
-///   solver's start, its answer, the generating pose and a random pose) on at
-///   least 95% of the sets. The problem is not convex: a local method started
-///   from a synthesized pose can settle in a different basin than the best of
-///   several restarts, and the count of such sets is printed.
+/// - local optimality, with and without restarts: the reference optimiser
+///   started from the solver's answer cannot lower its weighted error by more
+///   than 2%;
+/// - global: with restarts, the solver is within 2% of the best reference run,
+///   from the solver's answers, its start, the generating pose and four random
+///   poses.
+///
+/// Without restarts the solver is locally optimal on every set, but on set 99
+/// it settles, from its start, in a basin with 6× the reference's error (the
+/// left foot held against one limit of its Y twist where the optimum has it
+/// against the other, the forearm folded differently): a local minimum of the
+/// joint limits, not an early stop or the iteration cap.
 #[test]
 fn weighted_optimality_against_reference() {
     let body = &cmu::BODY;
-    let mut rng = Rng(0x5_EED0_F0B7);
+    // The goal sets come from `rng` as they always have (one random pose per
+    // set feeds the reference); the reference's further random starts from
+    // `more`.
+    let (mut rng, mut more) = (Rng(0x5_EED0_F0B7), Rng(0xF0B7_5EED));
     let root = Vec3::new(0.0, 0.95, 0.0);
-    let s = Solver {
-        max_iterations: 40,
-        ..STRICT
-    };
-    let (mut worst, mut total_it, mut local_fails, mut global_misses) =
-        (0.0f64, 0u32, vec![], vec![]);
+    let s = STRICT.with_restarts(3);
+    let (mut worst, mut total_it, mut local_fails, mut global_misses, mut once_misses) =
+        (1.0f64, 0u32, vec![], vec![], vec![]);
     let n = 100u32;
     for i in 0..n {
         let truth = random_pose(body, &mut rng, root);
         let goals = random_goals(&mut rng, &truth);
         let start = perturb(body, &mut rng, &truth, 0.3);
         let (a, rep) = run(&s, body, &goals, &start);
+        let (once, _) = run(&s.with_restarts(0), body, &goals, &start);
         assert_within_limits(body, &a, "optimality");
+        assert_within_limits(body, &once, "optimality without restarts");
         let e_solver = ref_energy(body, &goals, &a);
-        let e_local = reference_optimum(&goals, &[&a], &mut rng, 0, RootMode::Fixed);
-        let e_global =
-            reference_optimum(&goals, &[&start, &truth], &mut rng, 1, RootMode::Fixed).min(e_local);
+        let e_once = ref_energy(body, &goals, &once);
+        let e_local = reference_optimum(&goals, &[&a], &mut more, 0, RootMode::Fixed);
+        let e_once_local = reference_optimum(&goals, &[&once], &mut more, 0, RootMode::Fixed);
+        let random = random_pose(body, &mut rng, root);
+        let e_global = reference_optimum(
+            &goals,
+            &[&start, &truth, &random],
+            &mut more,
+            3,
+            RootMode::Fixed,
+        )
+        .min(e_local)
+        .min(e_once_local);
         total_it += rep.iterations;
         // Absolute slack: the solver stops once every goal is within its
         // tolerance (1e-5 m), i.e. at Σw·tol² ≤ 4·100·1e-10.
-        if e_solver > 1.02 * e_local + 4e-8 {
-            local_fails.push((i, e_solver, e_local));
+        for (e, e_ref) in [(e_solver, e_local), (e_once, e_once_local)] {
+            if e > 1.02 * e_ref + 4e-8 {
+                local_fails.push((i, e, e_ref));
+            }
+        }
+        if e_once > 1.02 * e_global + 4e-8 {
+            once_misses.push(i);
         }
         if e_solver > 1.02 * e_global + 4e-8 {
             global_misses.push((i, e_solver, e_global));
-        } else if e_global > 1e-8 {
-            worst = worst.max((e_solver - e_global) / e_global);
+        }
+        if e_global > 1e-6 {
+            worst = worst.max(e_solver / e_global);
         }
     }
     println!(
-        "weighted optimality: {n} sets, locally optimal {}/{n}, within 2% of the best reference {}/{n} \
-         (worst excess among those {:.3}%), mean iterations {:.1}; other basins: {global_misses:?}",
-        n as usize - local_fails.len(),
+        "weighted optimality: {n} sets, local optima {}/{}, within 2% of the best reference {}/{n} \
+         (worst ratio {worst:.4} where the optimum exceeds 1e-6), mean iterations {:.1}; \
+         without restarts other basins on sets {once_misses:?}",
+        2 * n as usize - local_fails.len(),
+        2 * n,
         n as usize - global_misses.len(),
-        worst * 100.0,
         f64::from(total_it) / f64::from(n)
     );
     assert!(
@@ -614,9 +641,8 @@ fn weighted_optimality_against_reference() {
         "not locally optimal: {local_fails:?}"
     );
     assert!(
-        global_misses.len() <= 5,
-        "{} of {n} sets beyond 2% of the best reference",
-        global_misses.len()
+        global_misses.is_empty(),
+        "beyond 2% of the best reference: {global_misses:?}"
     );
 }
 
