@@ -15,7 +15,7 @@
 use super::reach::bit;
 use super::slots::{Kind, MAX_GOALS, Slot, Slots};
 use super::{ReachTree, RootMode, SolveError, Solver, Work};
-use crate::body::Axis;
+use crate::body::{Axis, Segment};
 use crate::goal::Frame;
 use crate::math;
 use glam::{Mat3, Quat, Vec3};
@@ -168,21 +168,10 @@ impl<const N: usize> Joints<N> {
         slots: &Slots,
     ) {
         let masks = self.slot_masks(tree, work, slots);
-        let deps = |b: u64| {
-            masks
-                .iter()
-                .take(slots.count)
-                .enumerate()
-                .fold((0u16, 0u16), |(a, f), (k, m)| {
-                    (
-                        if m.0 & b != 0 { a | 1 << k } else { a },
-                        if m.1 & b != 0 { f | 1 << k } else { f },
-                    )
-                })
-        };
+        let masks = masks.get(..slots.count).unwrap_or(&[]);
         let anchor = match solver.root {
             RootMode::Float => {
-                let (dep_a, dep_b) = deps(u64::MAX);
+                let (dep_a, dep_b) = deps(masks, u64::MAX);
                 self.push(Group {
                     seg: TRANSLATION,
                     count: 3,
@@ -196,47 +185,17 @@ impl<const N: usize> Joints<N> {
             }
             RootMode::Fixed => Some(0),
         };
-        for (s, seg) in work.body.segments.iter().enumerate().skip(1) {
-            if tree.moves(s, anchor) && seg.joint.count() > 0 {
-                let (dep_a, dep_b) = deps(bit(s));
-                let mut g = Group {
-                    seg: u8::try_from(s).unwrap_or(0),
-                    parent: seg.parent,
-                    offset: seg.origin,
-                    dep_a,
-                    dep_b,
-                    ..NO_GROUP
-                };
-                let (mut min, mut max) = ([0.0f32; 3], [0.0f32; 3]);
-                for (((d, a), lo), hi) in seg
-                    .joint
-                    .dofs()
-                    .iter()
-                    .zip(&mut g.axes)
-                    .zip(&mut min)
-                    .zip(&mut max)
-                {
-                    (*a, *lo, *hi) = (d.axis, d.min, d.max);
-                    g.count += 1;
-                }
-                (g.min, g.max) = (Vec3::from_array(min), Vec3::from_array(max));
-                self.push(g);
-                self.moving |= bit(s);
+        // The path in segment order; a moving joint's group as it comes.
+        for (s, seg) in work.body.segments.iter().enumerate() {
+            let b = bit(s);
+            if self.path & b == 0 {
+                continue;
             }
-        }
-        self.order_path(work.body.len());
-    }
-
-    /// Lists the path segments in order with their groups.
-    fn order_path(&mut self, len: usize) {
-        let mut groups = self.groups.iter().take(self.count).enumerate();
-        for s in (0..len).filter(|&s| self.path & bit(s) != 0) {
-            let group = if self.moving & bit(s) == 0 {
-                FIXED
+            let group = if s > 0 && seg.joint.count() > 0 && tree.moves(s, anchor) {
+                self.moving |= b;
+                self.push(joint_group(s, seg, deps(masks, b)))
             } else {
-                groups
-                    .find(|(_, g)| usize::from(g.seg) == s)
-                    .map_or(FIXED, |(i, _)| u8::try_from(i).unwrap_or(FIXED))
+                FIXED
             };
             if let Some(o) = self.order.get_mut(self.nodes) {
                 *o = (u8::try_from(s).unwrap_or(0), group);
@@ -267,11 +226,14 @@ impl<const N: usize> Joints<N> {
         masks
     }
 
-    fn push(&mut self, g: Group) {
-        if let Some(slot) = self.groups.get_mut(self.count) {
-            *slot = g;
-            self.count += 1;
-        }
+    /// Appends a group; returns its index ([`FIXED`] if there is no room).
+    fn push(&mut self, g: Group) -> u8 {
+        let Some(slot) = self.groups.get_mut(self.count) else {
+            return FIXED;
+        };
+        *slot = g;
+        self.count += 1;
+        u8::try_from(self.count - 1).unwrap_or(FIXED)
     }
 
     /// The groups in use.
@@ -324,6 +286,46 @@ impl<const N: usize> Joints<N> {
             }
         }
     }
+}
+
+/// The slots whose point (`.0`) and whose frame segment (`.1`) the joints of
+/// the segments in `b` move, given each slot's ancestry masks.
+fn deps(masks: &[(u64, u64)], b: u64) -> (u16, u16) {
+    masks
+        .iter()
+        .enumerate()
+        .fold((0u16, 0u16), |(a, f), (k, m)| {
+            (
+                if m.0 & b != 0 { a | 1 << k } else { a },
+                if m.1 & b != 0 { f | 1 << k } else { f },
+            )
+        })
+}
+
+/// The group of segment `s`'s joint.
+fn joint_group(s: usize, seg: &Segment<'_>, (dep_a, dep_b): (u16, u16)) -> Group {
+    let mut g = Group {
+        seg: u8::try_from(s).unwrap_or(0),
+        parent: seg.parent,
+        offset: seg.origin,
+        dep_a,
+        dep_b,
+        ..NO_GROUP
+    };
+    let (mut min, mut max) = ([0.0f32; 3], [0.0f32; 3]);
+    for (((d, a), lo), hi) in seg
+        .joint
+        .dofs()
+        .iter()
+        .zip(&mut g.axes)
+        .zip(&mut min)
+        .zip(&mut max)
+    {
+        (*a, *lo, *hi) = (d.axis, d.min, d.max);
+        g.count += 1;
+    }
+    (g.min, g.max) = (Vec3::from_array(min), Vec3::from_array(max));
+    g
 }
 
 /// The links of group `g` in the link store.
