@@ -10,7 +10,8 @@
 //!
 //! Everything is sized by the body's capacity `N` (a group per moving
 //! segment; the root, which never turns, leaves room for the translation) and
-//! built in place: a solve starts by clearing a few kilobytes, not tens.
+//! built in place: a solve clears about 240 bytes per segment of capacity
+//! (7.5 kB for `N` = 32), plus 4.6 kB for the goals and their blocks.
 
 use super::reach::bit;
 use super::slots::{Kind, MAX_GOALS, Slot, Slots};

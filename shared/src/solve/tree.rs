@@ -12,9 +12,12 @@
 //! and kept if that helps ([`Solver::extrapolate`]).
 //!
 //! The solve stops when every goal is within `tolerance`; when an accepted step
-//! moved no goal's residual by more than `tolerance` (the error is then within
-//! about `Σ w·tolerance²` of its minimum); when the damping needed to lower
-//! `E` exceeds [`MAX_DAMPING`] (a minimum); or at the iteration cap.
+//! moved no goal's residual by more than `tolerance`, or lowered `E` by less
+//! than `Σ w·tolerance²` (what is left would not move a servo; the error is
+//! then within about `Σ w·tolerance²` of the minimum the steps head for);
+//! when the damping needed to lower `E` exceeds [`MAX_DAMPING`] (a minimum);
+//! or at the iteration cap. A start that already meets every goal costs no
+//! iteration.
 //!
 //! Per iteration: one forward kinematics of the segments the goals hang from,
 //! the columns (a cross product per DOF and goal it moves), and one block
