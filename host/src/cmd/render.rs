@@ -240,12 +240,20 @@ pub fn read_goals(
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let file: GoalsFile =
         serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
-    let entries = match file {
-        GoalsFile::List(g) | GoalsFile::Object { goals: g } => g,
+    let (entries, list) = match file {
+        GoalsFile::List(g) => (g, ""),
+        GoalsFile::Object { goals: g } => (g, "goals"),
     };
     entries
         .iter()
-        .map(|g| mark(body, world, g).map_err(|e| format!("{}: {e}", path.display()).into()))
+        .enumerate()
+        .map(|(i, g)| {
+            mark(body, world, g).map_err(|e| {
+                let field = format!("{list}[{i}]");
+                let line = crate::locate::line(&text, &field);
+                format!("{}:{line}: {field}: {e}", path.display()).into()
+            })
+        })
         .collect()
 }
 
@@ -451,5 +459,22 @@ mod tests {
         let bad: GoalEntry =
             serde_json::from_str(r#"{"segment": 40, "target": [0, 0, 0]}"#).unwrap();
         assert!(mark(&body, &world, &bad).unwrap_err().contains("40"));
+    }
+
+    #[test]
+    fn a_bad_goal_names_the_file_the_line_and_the_entry() {
+        let body = body::tempus::BODY;
+        let world = rest_pose(&body).unwrap();
+        let path =
+            std::env::temp_dir().join(format!("marionette-goals-{}.json", std::process::id()));
+        let json = "{\"goals\": [\n  {\"segment\": \"head\", \"target\": [0, 2, 0]},\n  {\"segment\": \"tail\", \"target\": [0, 0, 0]}\n]}";
+        std::fs::write(&path, json).unwrap();
+        let err = read_goals(&body, &world, &path).unwrap_err().to_string();
+        let _ = std::fs::remove_file(&path);
+        let want = format!(
+            "{}:3: goals[1]: goal on unknown segment \"tail\"",
+            path.display()
+        );
+        assert_eq!(err, want);
     }
 }
