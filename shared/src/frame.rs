@@ -10,7 +10,7 @@
 //! ```text
 //! wire::Receiver ─ ValidTrackerFrame ─▶ map   rig sensor map → parameters + weighted goals
 //!                                      ▶ synth grid query on the table blob, read in place
-//!                                      ▶ solve warm-started from the synthesized pose
+//!                                      ▶ solve synthesized pose + last frame's correction
 //!                                      ▶ servo joint angle → calibrated pulse → slew limit
 //! ```
 //!
@@ -21,7 +21,10 @@
 //!   projected into the valid cells, as the grid module documents) and the
 //!   pose of every segment is interpolated from the flash-resident samples.
 //! - **solve**: the synthesized pose is projected onto the joints' degrees of
-//!   freedom and the goals are solved from there ([`Solver::DEFAULT`]); the
+//!   freedom; on the joints the active goals hang from, the previous frame's
+//!   correction (solved minus synthesized) is added back, so the solver
+//!   starts where it left those goals a frame ago, moved by how the
+//!   synthesis moved; then the goals are solved ([`Solver::DEFAULT`]). The
 //!   solver never leaves a joint limit.
 //! - **servo**: each servo follows one joint angle through its calibration
 //!   and a [`Slew`] limiter, so no pulse leaves its calibrated range or moves
@@ -191,6 +194,83 @@ fn table_reason(e: TableError) -> StatusReason {
     }
 }
 
+/// The solver's correction of the last frame: solved minus synthesized
+/// angles, root shift and turn.
+///
+/// Live, the solver starts from this frame's synthesized pose **plus the
+/// last frame's correction** on the joints the active goals hang from (their
+/// paths to the root, and the root itself); every other joint starts, and
+/// stays, as synthesized. So the start keeps the table's style and is already
+/// where the solver left the goals a frame ago, moved only by how the
+/// synthesis moved: a warm start from the previous frame's solution that
+/// never drifts away from the synthesis on joints no goal pulls. The
+/// correction is dropped when a solve fails and when the loop disarms or
+/// times out.
+#[derive(Clone, Copy, Debug)]
+struct Correction {
+    values: [[f32; 3]; MAX_SEGMENTS],
+    root_shift: glam::Vec3,
+    root_turn: Quat,
+}
+
+impl Correction {
+    /// `solved − synth`.
+    fn between(synth: &Angles<MAX_SEGMENTS>, solved: &Angles<MAX_SEGMENTS>) -> Self {
+        let mut values = [[0.0; 3]; MAX_SEGMENTS];
+        for ((c, a), b) in values.iter_mut().zip(&solved.values).zip(&synth.values) {
+            for ((c, a), b) in c.iter_mut().zip(a).zip(b) {
+                *c = a - b;
+            }
+        }
+        Self {
+            values,
+            root_shift: solved.root_position - synth.root_position,
+            root_turn: solved.root_rotation * synth.root_rotation.conjugate(),
+        }
+    }
+
+    /// Adds the correction to `angles` on the joints the active goals hang
+    /// from, then clamps into the joint limits.
+    fn apply(
+        &self,
+        body: &Body<'_>,
+        goals: &GoalSet<MAX_GOALS>,
+        angles: &mut Angles<MAX_SEGMENTS>,
+    ) {
+        let mut pulled = [false; MAX_SEGMENTS];
+        for g in goals.as_slice().iter().filter(|g| g.weight > 0.0) {
+            let mut s = usize::from(g.segment);
+            while let Some(mark) = pulled.get_mut(s) {
+                if *mark {
+                    break;
+                }
+                *mark = true;
+                match body.parents.get(s) {
+                    Some(&p) if p != pose::NO_PARENT => s = usize::from(p),
+                    _ => break,
+                }
+            }
+        }
+        if !pulled.contains(&true) {
+            return;
+        }
+        for ((v, c), _) in angles
+            .values
+            .iter_mut()
+            .zip(&self.values)
+            .zip(&pulled)
+            .filter(|(_, p)| **p)
+        {
+            for (v, c) in v.iter_mut().zip(c) {
+                *v += c;
+            }
+        }
+        angles.root_position += self.root_shift;
+        angles.root_rotation = crate::math::normalize_quat(self.root_turn * angles.root_rotation);
+        angles.clamp_to_limits(body);
+    }
+}
+
 /// The live loop of one rig (see the module doc).
 pub struct Performer<'r, 'a> {
     rig: &'r Rig<'a>,
@@ -210,6 +290,7 @@ pub struct Performer<'r, 'a> {
     last_sensors: List<Sensor, MAX_SENSORS>,
     goals: GoalSet<MAX_GOALS>,
     angles: Angles<MAX_SEGMENTS>,
+    warm: Option<Correction>,
     synth: Pose<MAX_SEGMENTS>,
     pose: Pose<MAX_SEGMENTS>,
     local: LocalPose<MAX_SEGMENTS>,
@@ -271,6 +352,7 @@ impl<'r, 'a> Performer<'r, 'a> {
             last_sensors: List::new(),
             goals: GoalSet::new(),
             angles,
+            warm: None,
             synth: Pose::default(),
             pose: *rig.rest_pose(),
             local: LocalPose::default(),
@@ -410,6 +492,9 @@ impl<'r, 'a> Performer<'r, 'a> {
     pub fn tick(&mut self, now_us: u32) -> Update {
         let timeout_us = self.rig.failsafe_timeout_ms().saturating_mul(1000);
         let lost = self.armed && now_us.wrapping_sub(self.last_frame_us) >= timeout_us;
+        if lost || !self.armed {
+            self.warm = None;
+        }
         if (lost || !self.armed) && !self.resting {
             let moved = self.ease_to_rest();
             return Update {
@@ -425,6 +510,7 @@ impl<'r, 'a> Performer<'r, 'a> {
 
     fn disarm(&mut self) {
         self.armed = false;
+        self.warm = None;
         self.disarms = self.disarms.wrapping_add(1);
     }
 
@@ -608,9 +694,14 @@ impl<'r, 'a> Performer<'r, 'a> {
         }
     }
 
-    /// Solves the goals from the synthesized start. False if it failed.
+    /// Solves the goals, warm-started (see [`Correction`]). False if it
+    /// failed.
     fn solve(&mut self) -> bool {
         let body: Body<'_> = self.rig.body();
+        let synth = self.angles;
+        if let Some(c) = &self.warm {
+            c.apply(&body, &self.goals, &mut self.angles);
+        }
         match solve::solve(
             &self.solver,
             &body,
@@ -622,9 +713,13 @@ impl<'r, 'a> Performer<'r, 'a> {
                 for (r, x) in self.residuals.iter_mut().zip(report.residuals.iter()) {
                     *r = *x;
                 }
+                self.warm = Some(Correction::between(&synth, &self.angles));
                 true
             }
-            Err(_) => false,
+            Err(_) => {
+                self.warm = None;
+                false
+            }
         }
     }
 
