@@ -185,3 +185,44 @@ fn without_tables_the_board_refuses_to_arm_and_says_why() {
     assert!(!status.armed);
     assert_eq!(status.reason, marionette_core::wire::StatusReason::NoTable);
 }
+
+/// The loop carries the solver's correction from frame to frame (its warm
+/// start): with the tracker held still, the solved figure settles and stays
+/// put instead of drifting (a correction added twice, or never replaced,
+/// would walk it away frame after frame).
+#[test]
+fn a_still_tracker_gives_a_still_figure() {
+    let rig = humanoid16();
+    let region = perform::region(&rig_blob(&rig, Some(60_000)), Some(&rest_table(&rig)));
+    let samples: Vec<_> = (0..200u32)
+        .flat_map(|i| {
+            let mut s = puppet::step(0, glam::DVec3::ZERO);
+            for x in &mut s {
+                x.time_us += u64::from(i) * 1000;
+            }
+            s
+        })
+        .collect();
+    let frames = perform::frames(&samples).unwrap();
+    let session = perform::session(&frames).unwrap();
+    let mut poses = Vec::new();
+    perform::simulate_with(&region, &session, &mut |p, u| {
+        if matches!(u.outputs, Some(marionette_core::frame::Cause::Frame(_))) {
+            poses.push(*p.pose());
+        }
+    })
+    .unwrap();
+    assert_eq!(poses.len(), 200);
+    let drift = |a: &marionette_core::pose::Pose<64>, b: &marionette_core::pose::Pose<64>| {
+        a.positions()
+            .iter()
+            .zip(b.positions())
+            .map(|(p, q)| (*p - *q).length())
+            .fold(0.0f32, f32::max)
+    };
+    // Settled after a few frames, then still (well under a servo's step).
+    for w in poses[20..].windows(2) {
+        assert!(drift(&w[0], &w[1]) < 1e-4, "the figure drifts");
+    }
+    assert!(drift(&poses[20], &poses[199]) < 1e-4, "the figure drifts");
+}
