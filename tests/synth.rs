@@ -315,19 +315,33 @@ fn affine_positions_are_reproduced() {
     }
 }
 
+/// The W&H hand grid: three linear axes (the trilinear tree).
+fn hand_layout() -> Vec<RefAxis> {
+    vec![lin(-0.3, 0.1, 5), lin(0.8, 0.15, 4), lin(0.2, 0.2, 3)]
+}
+
+/// The W&H pedalling layout: two linear axes and a cyclic Catmull-Rom one.
+fn pedal_layout() -> Vec<RefAxis> {
+    let crank = lin(0.0, std::f64::consts::TAU / 8.0, 8);
+    vec![
+        lin(-0.2, 0.1, 3),
+        lin(0.1, 0.05, 3),
+        RefAxis {
+            cubic: true,
+            cyclic: true,
+            ..crank
+        },
+    ]
+}
+
 #[test]
 fn grid_matches_f64_reference_tree() {
     // Trilinear (W&H hand grid), the W&H pedalling layout (2 linear + cyclic
     // Catmull-Rom), and a bounded Catmull-Rom mix, against the f64 tree.
     let cr = |a: RefAxis| RefAxis { cubic: true, ..a };
-    let cyc = |a: RefAxis| RefAxis { cyclic: true, ..a };
     let configs = [
-        vec![lin(-0.3, 0.1, 5), lin(0.8, 0.15, 4), lin(0.2, 0.2, 3)],
-        vec![
-            lin(-0.2, 0.1, 3),
-            lin(0.1, 0.05, 3),
-            cr(cyc(lin(0.0, std::f64::consts::TAU / 8.0, 8))),
-        ],
+        hand_layout(),
+        pedal_layout(),
         vec![cr(lin(0.0, 0.5, 6)), lin(1.0, 1.0, 2)],
         vec![
             lin(0.0, 1.0, 3),
@@ -465,15 +479,9 @@ fn every_read_path_gives_the_same_bits() {
     // (`pose_scalar`), with rows, one call per sample, or the decoding hint:
     // the same operations in the same order, so the same bits, on the hand
     // grid (its own tree), the pedal layout and a 2-axis grid.
-    let cr = |a: RefAxis| RefAxis { cubic: true, ..a };
-    let cyc = |a: RefAxis| RefAxis { cyclic: true, ..a };
     let configs = [
-        vec![lin(-0.3, 0.1, 5), lin(0.8, 0.15, 4), lin(0.2, 0.2, 3)],
-        vec![
-            lin(-0.2, 0.1, 3),
-            lin(0.1, 0.05, 3),
-            cr(cyc(lin(0.0, std::f64::consts::TAU / 8.0, 8))),
-        ],
+        hand_layout(),
+        pedal_layout(),
         vec![lin(0.0, 0.5, 6), lin(1.0, 1.0, 2)],
     ];
     let bits = |p: &Pose<31>| {
