@@ -114,11 +114,11 @@ pub fn parse(src: &Source) -> Result<ExampleSet, InputError> {
         .collect::<Result<Vec<_>, _>>()?;
     if axes.is_empty() || axes.len() > MAX_AXES {
         let problem = format!("expected 1 to {MAX_AXES} axes, found {}", axes.len());
-        return Err(src.error_at(key_offset(src, "axes"), "axes", problem));
+        return Err(src.error_line(crate::locate::line(&src.text, "axes"), "axes", problem));
     }
     if raw.examples.is_empty() {
-        return Err(src.error_at(
-            key_offset(src, "examples"),
+        return Err(src.error_line(
+            crate::locate::line(&src.text, "examples"),
             "examples",
             "expected at least one example",
         ));
@@ -139,11 +139,6 @@ pub fn parse(src: &Source) -> Result<ExampleSet, InputError> {
 /// Byte offset of a borrowed raw value inside the source text.
 fn offset(src: &Source, raw: &RawValue) -> usize {
     (raw.get().as_ptr() as usize).saturating_sub(src.text.as_ptr() as usize)
-}
-
-/// Offset of the first `"key"` in the text (for errors about a whole array).
-fn key_offset(src: &Source, key: &str) -> usize {
-    src.text.find(&format!("\"{key}\"")).unwrap_or(0)
 }
 
 /// A serde_json error inside a value that starts on `base_line`.
@@ -174,7 +169,11 @@ fn segment_names(src: &Source, raw: &[&RawValue]) -> Result<Vec<String>, InputEr
             "expected 1 to {MAX_SEGMENTS} segment names, found {}",
             raw.len()
         );
-        return Err(src.error_at(key_offset(src, "segments"), "segments", problem));
+        return Err(src.error_line(
+            crate::locate::line(&src.text, "segments"),
+            "segments",
+            problem,
+        ));
     }
     let mut out: Vec<String> = Vec::with_capacity(raw.len());
     for (i, r) in raw.iter().enumerate() {
