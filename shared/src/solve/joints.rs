@@ -160,7 +160,7 @@ impl<const N: usize> Joints<N> {
     };
 
     /// Finds the groups that move for these goals, in segment order (the
-    /// translation first).
+    /// translation first), in place of any it held.
     pub fn init(
         &mut self,
         solver: &Solver,
@@ -168,6 +168,7 @@ impl<const N: usize> Joints<N> {
         work: &Work<'_, '_, N>,
         slots: &Slots,
     ) {
+        (self.count, self.nodes, self.path, self.moving) = (0, 0, 0, 0);
         let masks = self.slot_masks(tree, work, slots);
         let masks = masks.get(..slots.count).unwrap_or(&[]);
         let anchor = match solver.root {

@@ -270,6 +270,10 @@ fn bounded_goal(g: &Goal) -> bool {
 
 /// Positions the body: moves `angles` (the warm start) to meet `goals` as well as
 /// possible by their weights, and leaves the world pose of the result in `pose`.
+///
+/// Builds its working state afresh (for `N` = 64, about 20 kB cleared); a
+/// loop that solves every frame keeps a [`SolverState`] and calls
+/// [`solve_with`] instead, with the same result.
 pub fn solve<const N: usize, const G: usize>(
     solver: &Solver,
     body: &Body<'_>,
@@ -277,21 +281,50 @@ pub fn solve<const N: usize, const G: usize>(
     angles: &mut Angles<N>,
     pose: &mut Pose<N>,
 ) -> Result<Report<G>, SolveError> {
+    solve_with(solver, body, goals, angles, pose, &mut SolverState::new())
+}
+
+/// [`solve`] with a working state that the caller keeps between solves.
+///
+/// The state is built in place on the first call and kept: the reach tree and
+/// the layout of the moving joints are reused as long as the same body (by
+/// address), method, root mode and active goals on the same segments and
+/// frames come back; goal targets, weights and kinds may change freely. The
+/// result is bit-identical to [`solve`]'s. After changing a body's contents
+/// in place (same address), call [`SolverState::reset`].
+pub fn solve_with<const N: usize, const G: usize>(
+    solver: &Solver,
+    body: &Body<'_>,
+    goals: &GoalSet<G>,
+    angles: &mut Angles<N>,
+    pose: &mut Pose<N>,
+    state: &mut SolverState<N>,
+) -> Result<Report<G>, SolveError> {
     let mut work = Work::new(body, goals.as_slice(), angles, pose);
     work.check()?;
-    let mut tree = ReachTree::<N>::EMPTY;
-    tree.fill(body, goals.as_slice())?;
+    let layout = Layout::of(solver, body, goals.as_slice());
+    let laid_out = layout.is_some() && state.layout == layout;
+    // Valid again only once this solve has built what it needs.
+    state.layout = None;
+    let tree = &mut state.tree;
+    if !laid_out {
+        *tree = ReachTree::EMPTY;
+        tree.fill(body, goals.as_slice())?;
+    }
     let (iterations, converged) = match solver.method {
-        Method::TreeDls if !tree.is_empty() => tree::solve(solver, &tree, &mut work)?,
+        Method::TreeDls if !tree.is_empty() => {
+            tree::solve(solver, tree, &mut state.lm, laid_out, &mut work)?
+        }
         _ => {
             work.forward()?;
             if tree.is_empty() {
                 (0, true)
             } else {
-                balance::solve(solver, &tree, &mut work)?
+                balance::solve(solver, tree, &mut work)?
             }
         }
     };
+    state.layout = layout;
     let mut report = Report {
         iterations,
         converged,
@@ -308,6 +341,84 @@ pub fn solve<const N: usize, const G: usize>(
         }
     }
     Ok(report)
+}
+
+/// The working state of [`solve_with`], kept by the caller between solves
+/// (a live loop keeps one per figure): the reach tree, the moving joints and
+/// their Jacobian columns, the goal rows and the goal-space system, sized by
+/// the body capacity `N` (about 240 bytes per segment of capacity, plus
+/// 5 kB).
+pub struct SolverState<const N: usize> {
+    tree: ReachTree<N>,
+    lm: tree::Lm<N>,
+    /// What `tree` and the joints in `lm` were built for; `None`: nothing
+    /// valid.
+    layout: Option<Layout>,
+}
+
+impl<const N: usize> SolverState<N> {
+    /// A state with nothing built yet.
+    #[must_use]
+    pub const fn new() -> Self {
+        SolverState {
+            tree: ReachTree::EMPTY,
+            lm: tree::Lm::EMPTY,
+            layout: None,
+        }
+    }
+
+    /// Forgets what was built, so that the next solve builds it again (after
+    /// a body's contents changed in place).
+    pub fn reset(&mut self) {
+        self.layout = None;
+    }
+}
+
+impl<const N: usize> Default for SolverState<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// What the reach tree and the joint layout depend on: the body (by the
+/// addresses of its tables and its length), the method and root mode, and
+/// per active goal, in order, its segment and frame segment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Layout {
+    body: [usize; 4],
+    method: Method,
+    root: RootMode,
+    count: usize,
+    /// Segment and frame segment (`u8::MAX`: the world) of each active goal.
+    goals: [(u8, u8); MAX_GOALS],
+}
+
+impl Layout {
+    /// The layout of a solve; `None` (never reused) with more active goals
+    /// than [`MAX_GOALS`].
+    fn of(solver: &Solver, body: &Body<'_>, goals: &[Goal]) -> Option<Self> {
+        let mut layout = Layout {
+            body: [
+                body.segments.as_ptr() as usize,
+                body.parents.as_ptr() as usize,
+                body.offsets.as_ptr() as usize,
+                body.len(),
+            ],
+            method: solver.method,
+            root: solver.root,
+            count: 0,
+            goals: [(0, 0); MAX_GOALS],
+        };
+        for g in goals.iter().filter(|g| g.is_active()) {
+            let frame = match g.frame {
+                Frame::World => u8::MAX,
+                Frame::Segment(f) => f,
+            };
+            *layout.goals.get_mut(layout.count)? = (g.segment, frame);
+            layout.count += 1;
+        }
+        Some(layout)
+    }
 }
 
 /// The weighted error `Σ weight · residual²` of the active goals at `angles`

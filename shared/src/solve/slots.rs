@@ -87,8 +87,9 @@ impl Slots {
     };
 
     /// Takes the active goals of the set (scaled by the heaviest weight
-    /// `wmax`), not yet evaluated.
+    /// `wmax`), not yet evaluated, in place of any it held.
     pub fn init(&mut self, goals: &[Goal], wmax: f32) -> Result<(), SolveError> {
+        (self.count, self.weight) = (0, 0.0);
         for (i, g) in goals.iter().enumerate().filter(|(_, g)| g.is_active()) {
             let (kind, one_sided) = match g.target {
                 Target::Position(_) => (Kind::Point, false),
@@ -97,10 +98,13 @@ impl Slots {
             };
             let rel = g.weight / wmax;
             let free = self.s.get_mut(self.count).ok_or(SolveError::TooManyGoals)?;
-            free.goal = u8::try_from(i).map_err(|_| SolveError::TooManyGoals)?;
-            free.kind = kind;
-            free.one_sided = one_sided;
-            free.sw = rel * math::rsqrt(rel);
+            *free = Slot {
+                goal: u8::try_from(i).map_err(|_| SolveError::TooManyGoals)?,
+                kind,
+                one_sided,
+                sw: rel * math::rsqrt(rel),
+                ..EMPTY_SLOT
+            };
             self.weight += rel;
             self.count += 1;
         }

@@ -43,18 +43,33 @@ const MAX_DAMPING: f32 = 100.0;
 /// The largest turn (rad) or translation (m) of one step.
 const MAX_STEP: f32 = 1.0;
 
-/// The state of one whole-tree solve, built in place.
-struct Lm<const N: usize> {
+/// The state of a whole-tree solve, built in place and kept between solves
+/// (inside a [`super::SolverState`]).
+pub(super) struct Lm<const N: usize> {
     joints: Joints<N>,
     slots: Slots,
     system: System,
 }
 
+impl<const N: usize> Lm<N> {
+    /// Nothing built yet.
+    pub const EMPTY: Self = Lm {
+        joints: Joints::EMPTY,
+        slots: Slots::EMPTY,
+        system: System::EMPTY,
+    };
+}
+
 /// Weighted DLS over the whole reach tree; returns (iterations, converged).
-/// Leaves the full world pose of the result in `work`.
+/// Leaves the full world pose of the result in `work`. With `laid_out`, the
+/// joints in `lm` are already those of `tree` for these goals (the same
+/// active goals on the same segments, the same body and root mode) and are
+/// not built again.
 pub(super) fn solve<const N: usize>(
     solver: &Solver,
     tree: &ReachTree<N>,
+    lm: &mut Lm<N>,
+    laid_out: bool,
     work: &mut Work<'_, '_, N>,
 ) -> Result<(u32, bool), SolveError> {
     let wmax = work
@@ -66,13 +81,10 @@ pub(super) fn solve<const N: usize>(
         work.forward()?;
         return Ok((0, true));
     }
-    let mut lm = Lm {
-        joints: Joints::EMPTY,
-        slots: Slots::EMPTY,
-        system: System::EMPTY,
-    };
     lm.slots.init(work.goals, wmax)?;
-    lm.joints.init(solver, tree, work, &lm.slots);
+    if !laid_out {
+        lm.joints.init(solver, tree, work, &lm.slots);
+    }
     let (mut iterations, mut converged) = lm.run(solver, work)?;
     let tol2 = solver.tolerance * solver.tolerance;
     if solver.restarts > 0 && lm.slots.worst > tol2 {
