@@ -49,6 +49,52 @@ pub(super) struct Group {
     turn: (f32, f32),
 }
 
+/// A joint's rotation relative to its parent, kept with the angles it was
+/// computed at (compared bit for bit), so that forward kinematics computes it
+/// again only when the angles change.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Local {
+    /// `rotation` is that of the angles `at` if this is the joints' current
+    /// generation (0: never).
+    generation: u32,
+    at: [f32; 3],
+    rotation: Quat,
+}
+
+/// The current generation and the local rotations.
+type Cache<'c, const N: usize> = (u32, &'c mut [Local; N]);
+
+impl Local {
+    /// Nothing kept (all zero bits: a new state is cleared, not copied).
+    const NONE: Local = Local {
+        generation: 0,
+        at: [0.0; 3],
+        rotation: Quat::from_xyzw(0.0, 0.0, 0.0, 0.0),
+    };
+
+    /// Whether the rotation was computed in this generation at exactly
+    /// these values.
+    #[inline]
+    fn holds(&self, generation: u32, values: &[f32; 3]) -> bool {
+        let [a, b, c] = self.at;
+        let [x, y, z] = *values;
+        self.generation == generation
+            && a.to_bits() == x.to_bits()
+            && b.to_bits() == y.to_bits()
+            && c.to_bits() == z.to_bits()
+    }
+
+    /// `rotation`, kept for the angles `at` in this generation.
+    #[inline]
+    fn new(generation: u32, at: [f32; 3], rotation: Quat) -> Self {
+        Local {
+            generation,
+            at,
+            rotation,
+        }
+    }
+}
+
 /// Per group and DOF, at the current linearisation: the curvature `|c|²`,
 /// the gradient `c·r̃` and the tension; the steps that would reach the lower
 /// and upper limits; `1 / D` (0 for a DOF that does not take part) and the
@@ -143,6 +189,12 @@ pub(super) struct Joints<const N: usize> {
     moving: u64,
     /// The root position before the step.
     back_root: Vec3,
+    /// Per segment, the rotation of its joint (and for a moving one, `turn`
+    /// in its group) at the angles it was last computed at.
+    local: [Local; N],
+    /// The generation of the entries of `local` that hold: a new layout
+    /// starts a new one.
+    generation: u32,
 }
 
 impl<const N: usize> Joints<N> {
@@ -157,6 +209,8 @@ impl<const N: usize> Joints<N> {
         path: 0,
         moving: 0,
         back_root: Vec3::ZERO,
+        local: [Local::NONE; N],
+        generation: 0,
     };
 
     /// Finds the groups that move for these goals, in segment order (the
@@ -169,6 +223,11 @@ impl<const N: usize> Joints<N> {
         slots: &Slots,
     ) {
         (self.count, self.nodes, self.path, self.moving) = (0, 0, 0, 0);
+        self.generation = self.generation.wrapping_add(1);
+        if self.generation == 0 {
+            // Wrapped: forget every entry for certain.
+            (self.local, self.generation) = ([Local::NONE; N], 1);
+        }
         let masks = self.slot_masks(tree, work, slots);
         let masks = masks.get(..slots.count).unwrap_or(&[]);
         let anchor = match solver.root {
@@ -355,8 +414,10 @@ impl<const N: usize> Joints<N> {
         for &(s, group) in self.order.iter().take(self.nodes) {
             let s = usize::from(s);
             let placed = match self.groups.get_mut(usize::from(group)) {
-                Some(g) if group != FIXED => place_moving(work, g),
-                _ => place_fixed(work, s),
+                Some(g) if group != FIXED => {
+                    place_moving(work, g, (self.generation, &mut self.local))
+                }
+                _ => place_fixed(work, s, (self.generation, &mut self.local)),
             };
             if let (Some((p, r)), Some(op), Some(or)) = (
                 placed,
@@ -370,18 +431,19 @@ impl<const N: usize> Joints<N> {
     }
 
     /// The world placement of the segments off the path.
-    pub fn forward_rest(&self, work: &mut Work<'_, '_, N>) {
+    pub fn forward_rest(&mut self, work: &mut Work<'_, '_, N>) {
         work.pose.count = work.body.len();
         let mut rest = !self.path & (u64::MAX >> (64 - work.body.len().clamp(1, 64)));
         while rest != 0 {
             let s = rest.trailing_zeros() as usize;
             rest &= rest - 1;
-            if let (Some(placement), true) = (place_fixed(work, s), s > 0)
-                && let (Some(op), Some(or)) = (
-                    work.pose.positions.get_mut(s),
-                    work.pose.rotations.get_mut(s),
-                )
-            {
+            if let (Some(placement), true) = (
+                place_fixed(work, s, (self.generation, &mut self.local)),
+                s > 0,
+            ) && let (Some(op), Some(or)) = (
+                work.pose.positions.get_mut(s),
+                work.pose.rotations.get_mut(s),
+            ) {
                 (*op, *or) = placement;
             }
         }
@@ -389,29 +451,49 @@ impl<const N: usize> Joints<N> {
 }
 
 /// The world placement of segment `s` (the root: its own) from its parent's
-/// and its joint's rotation at the current angles.
+/// and its joint's rotation at the current angles (kept in `cache`).
 #[inline]
-fn place_fixed<const N: usize>(work: &Work<'_, '_, N>, s: usize) -> Option<(Vec3, Quat)> {
+fn place_fixed<const N: usize>(
+    work: &Work<'_, '_, N>,
+    s: usize,
+    (generation, cache): Cache<'_, N>,
+) -> Option<(Vec3, Quat)> {
     let Some(parent) = work.body.parent(s) else {
         return Some((work.angles.root_position, work.angles.root_rotation));
     };
-    let local = work.body.segment(s)?.joint.rotation(work.angles.get(s)?);
+    let values = work.angles.get(s)?;
+    let kept = cache.get_mut(s)?;
+    if !kept.holds(generation, values) {
+        let rotation = work.body.segment(s)?.joint.rotation(values);
+        *kept = Local::new(generation, *values, rotation);
+    }
+    let local = kept.rotation;
     let pp = *work.pose.positions.get(parent)?;
     let rp = *work.pose.rotations.get(parent)?;
     Some((pp + rp * *work.body.offsets.get(s)?, rp * local))
 }
 
 /// The world placement of a moving group's segment, rebuilding its local
-/// rotation and keeping the sine and cosine of its first angle.
+/// rotation (if its angles changed) and keeping the sine and cosine of its
+/// first angle.
 #[inline]
-fn place_moving<const N: usize>(work: &mut Work<'_, '_, N>, g: &mut Group) -> Option<(Vec3, Quat)> {
+fn place_moving<const N: usize>(
+    work: &mut Work<'_, '_, N>,
+    g: &mut Group,
+    (generation, cache): Cache<'_, N>,
+) -> Option<(Vec3, Quat)> {
     let s = usize::from(g.seg);
     let parent = usize::from(g.parent);
     let pp = *work.pose.positions.get(parent)?;
     let rp = *work.pose.rotations.get(parent)?;
-    let (lr, (sin, cos)) = local_rotation(&g.axes, g.count, work.angles.get(s)?);
-    g.turn = (2.0 * sin * cos, cos * cos - sin * sin);
-    Some((pp + rp * g.offset, rp * lr))
+    let values = work.angles.get(s)?;
+    let kept = cache.get_mut(s)?;
+    if !kept.holds(generation, values) {
+        let (rotation, (sin, cos)) = local_rotation(&g.axes, g.count, values);
+        g.turn = (2.0 * sin * cos, cos * cos - sin * sin);
+        *kept = Local::new(generation, *values, rotation);
+    }
+    Some((pp + rp * g.offset, rp * kept.rotation))
 }
 
 /// The rotation of a joint with these axes (bit-identical to
