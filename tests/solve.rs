@@ -18,7 +18,7 @@ use glam::{Quat, Vec3};
 use marionette_core::body::{Angles, Axis, Body, cmu, tempus};
 use marionette_core::goal::{Attach, Frame, Goal, GoalSet, PlaneSide, Target};
 use marionette_core::pose::{LocalPose, Pose};
-use marionette_core::solve::{Method, Report, RootMode, Solver, solve};
+use marionette_core::solve::{Method, Report, RootMode, Solver, SolverState, solve, solve_with};
 use reference::{RefBody, RefGoal, RefState, RefTarget, V};
 
 const METHODS: [Method; 4] = [Method::Greedy, Method::Ccd, Method::Dls, Method::TreeDls];
@@ -1156,4 +1156,97 @@ fn warm_start() {
     }
     println!("warm start: {cold_it} iterations cold, {warm_it} warm (10 problems)");
     assert!(warm_it * 2 < cold_it, "{warm_it} vs {cold_it}");
+}
+
+/// A live loop's solver state: frame after frame, `solve_with` and a state
+/// carried from the previous frame give bit-identical angles, poses and
+/// reports to fresh `solve` calls, while the goals move, a goal is switched
+/// off and on, goal kinds change (point, plane, orientation, another
+/// segment's frame), the method and root mode change, another body comes,
+/// and a refused solve comes in between.
+#[test]
+fn carried_state_matches_fresh_solves() {
+    use cmu::index::*;
+    let mut rng = Rng(0x57A7E);
+    let mut state = SolverState::<64>::new();
+    let root = Vec3::new(0.0, 0.95, 0.0);
+    let truth = random_pose(&cmu::BODY, &mut rng, root);
+    let mut goals = GoalSet::<5>::new();
+    for seg in [LEFT_HAND, RIGHT_HAND, LEFT_FOOT, RIGHT_FOOT] {
+        let p = vf(ref_touch(&cmu::BODY, &truth, seg));
+        goals.push(Goal::reach(seg, p, 1.0)).unwrap();
+    }
+    let mut fresh = perturb(&cmu::BODY, &mut rng, &truth, 0.1);
+    let mut carried = fresh;
+    let (mut fresh_pose, mut carried_pose) = (Pose::<64>::default(), Pose::<64>::default());
+    let mut frames = 0;
+    for frame in 0..24 {
+        let (body, s) = match frame {
+            // Another body (the state is rebuilt), then back.
+            12 | 13 => (&tempus::BODY, Solver::DEFAULT),
+            // The paper's method and a floating root on the same state.
+            9 => (&cmu::BODY, Solver::DEFAULT.with_method(Method::Greedy)),
+            10 => (&cmu::BODY, Solver::DEFAULT.with_root(RootMode::Float)),
+            _ => (&cmu::BODY, Solver::DEFAULT),
+        };
+        if frame == 12 {
+            fresh = tempus_standing();
+            carried = fresh;
+        }
+        if frame == 14 {
+            fresh = perturb(&cmu::BODY, &mut rng, &truth, 0.1);
+            carried = fresh;
+        }
+        let mut g = goals;
+        if matches!(frame, 12 | 13) {
+            g = GoalSet::new();
+            let p = Vec3::new(0.3, 1.2, 0.3) + 0.05 * (frame as f32) * Vec3::X;
+            g.push(Goal::reach(tempus::index::RIGHT_HAND, p, 1.0))
+                .unwrap();
+        }
+        match frame {
+            // A goal switched off, then on again.
+            4 | 5 => g.as_mut_slice()[1].weight = 0.0,
+            // The right foot on the floor plane, the left hand's orientation.
+            6 => {
+                g.as_mut_slice()[3].target = Target::Plane {
+                    normal: Vec3::Y,
+                    offset: 0.0,
+                    side: PlaneSide::Above,
+                };
+                g.push(Goal::orient(LEFT_HAND, Quat::from_rotation_y(0.3), 0.5))
+                    .unwrap();
+            }
+            // The right hand held in the left hand's frame.
+            7 => {
+                let slot = &mut g.as_mut_slice()[1];
+                slot.frame = Frame::Segment(LEFT_HAND);
+                slot.target = Target::Position(Vec3::new(0.0, 0.0, 0.2));
+            }
+            // A goal on a segment that does not exist: refused by both.
+            15 => g.as_mut_slice()[0].segment = 99,
+            _ => {}
+        }
+        let a = solve(&s, body, &g, &mut fresh, &mut fresh_pose);
+        let b = solve_with(&s, body, &g, &mut carried, &mut carried_pose, &mut state);
+        assert_eq!(a, b, "frame {frame}");
+        assert_eq!(fresh, carried, "frame {frame}");
+        assert_eq!(fresh_pose, carried_pose, "frame {frame}");
+        frames += usize::from(a.is_ok());
+        // The goals move by up to 2 cm for the next frame.
+        for goal in goals.as_mut_slice() {
+            if let Target::Position(p) = &mut goal.target {
+                *p += v(
+                    rng.uniform(-0.0115, 0.0115),
+                    rng.uniform(-0.0115, 0.0115),
+                    rng.uniform(-0.0115, 0.0115),
+                );
+            }
+        }
+        if frame == 20 {
+            // Forgetting is harmless.
+            state.reset();
+        }
+    }
+    assert_eq!(frames, 23);
 }

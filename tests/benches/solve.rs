@@ -5,7 +5,9 @@
 //!   pose, moved up to 3 cm; the start is that pose with every DOF moved up to
 //!   ±0.1 rad (what interpolation synthesis hands the solver);
 //! - **cold, rest start**: the same goals from the rest pose (T-pose);
-//! - **warm**: from the previous frame's solution, every goal moved ≤ 2 cm.
+//! - **warm**: from the previous frame's solution, every goal moved ≤ 2 cm
+//!   (`warm/…` with a fresh working state, `warm-state/TreeDls` with the
+//!   [`SolverState`] the previous frame's solve left, as a live loop keeps it).
 //!
 //! Before the criterion runs, a README-ready table compares the paper's greedy
 //! chain solver with CCD, chain DLS and the whole-tree DLS on the same problems:
@@ -16,12 +18,12 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use glam::Vec3;
 use marionette_core::body::{Angles, Body, cmu};
 use marionette_core::goal::{Goal, GoalSet, Target};
 use marionette_core::pose::{LocalPose, Pose};
-use marionette_core::solve::{Method, RootMode, Solver, solve};
+use marionette_core::solve::{Method, RootMode, Solver, SolverState, solve, solve_with};
 
 const N: usize = 32;
 const PROBLEMS: usize = 32;
@@ -223,6 +225,32 @@ fn benches(c: &mut Criterion) {
             });
         }
     }
+    // The live loop's warm frame: the state the previous frame's solve left
+    // (`solve_with`), cloned outside the timed region for every solve.
+    let warm: Vec<(A, GoalSet<4>, SolverState<N>)> = problems
+        .iter()
+        .map(|p| {
+            let (mut a, mut pose, mut state) = (p.synth, Pose::<N>::default(), SolverState::new());
+            let s = solver(Method::TreeDls);
+            solve_with(&s, &cmu::BODY, &p.goals, &mut a, &mut pose, &mut state).expect("solve");
+            (a, p.moved, state)
+        })
+        .collect();
+    group.bench_function("warm-state/TreeDls", |b| {
+        let mut i = 0;
+        b.iter_batched_ref(
+            || {
+                i = (i + 1) % warm.len();
+                let (a, g, state) = &warm[i];
+                (*a, *g, state.clone(), Pose::<N>::default())
+            },
+            |(a, g, state, pose)| {
+                let s = solver(Method::TreeDls);
+                black_box(solve_with(&s, &cmu::BODY, g, a, pose, state))
+            },
+            BatchSize::SmallInput,
+        );
+    });
     group.finish();
 }
 

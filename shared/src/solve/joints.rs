@@ -172,6 +172,7 @@ impl Group {
 }
 
 /// The moving joints, their state and their columns.
+#[derive(Clone)]
 pub(super) struct Joints<const N: usize> {
     pub groups: [Group; N],
     pub dofs: [Dofs; N],

@@ -348,6 +348,7 @@ pub fn solve_with<const N: usize, const G: usize>(
 /// their Jacobian columns, the goal rows and the goal-space system, sized by
 /// the body capacity `N` (about 240 bytes per segment of capacity, plus
 /// 5 kB).
+#[derive(Clone)]
 pub struct SolverState<const N: usize> {
     tree: ReachTree<N>,
     lm: tree::Lm<N>,
