@@ -247,15 +247,31 @@ impl<const N: usize> Joints<N> {
             }
             RootMode::Fixed => Some(0),
         };
-        // The path in segment order; a moving joint's group as it comes.
-        for (s, seg) in work.body.segments.iter().enumerate() {
-            let b = bit(s);
-            if self.path & b == 0 {
-                continue;
+        // Per segment, the slots whose point and whose frame it moves.
+        let mut moves = [(0u16, 0u16); N];
+        for (j, &(point, frame)) in masks.iter().enumerate() {
+            for (mut m, frame) in [(point, false), (frame, true)] {
+                while m != 0 {
+                    let s = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    if let Some(d) = moves.get_mut(s) {
+                        let d = if frame { &mut d.1 } else { &mut d.0 };
+                        *d |= 1 << j;
+                    }
+                }
             }
+        }
+        // The path in segment order; a moving joint's group as it comes.
+        let mut path = self.path;
+        while path != 0 {
+            let s = path.trailing_zeros() as usize;
+            path &= path - 1;
+            let (Some(seg), Some(&deps)) = (work.body.segments.get(s), moves.get(s)) else {
+                continue;
+            };
             let group = if s > 0 && seg.joint.count() > 0 && tree.moves(s, anchor) {
-                self.moving |= b;
-                self.push(joint_group(s, seg, deps(masks, b)))
+                self.moving |= bit(s);
+                self.push(joint_group(s, seg, deps))
             } else {
                 FIXED
             };
@@ -391,7 +407,7 @@ fn joint_group(s: usize, seg: &Segment<'_>, (dep_a, dep_b): (u16, u16)) -> Group
 }
 
 /// The links of group `g` in the link store.
-#[inline]
+#[inline(always)]
 pub(super) fn links_of<'l>(links: &'l [[Link; 2]], g: &Group) -> &'l [Link] {
     let start = usize::from(g.start);
     links
@@ -517,7 +533,7 @@ fn local_rotation(axes: &[Axis; 3], count: u8, values: &[f32; 3]) -> (Quat, (f32
 
 /// Column `axis` of the rotation matrix of `q`: the world direction of that
 /// local axis.
-#[inline]
+#[inline(always)]
 fn column(q: Quat, axis: Axis) -> Vec3 {
     let (x, y, z, w) = (q.x, q.y, q.z, q.w);
     match axis {
@@ -543,6 +559,7 @@ fn column(q: Quat, axis: Axis) -> Vec3 {
 /// rotations: the axis of DOF `k` is `R_parent · R_0 ⋯ R_{k−1} · axis_k`; the
 /// first is `R_parent · axis_0`, the last `R_segment · axis_last`, a middle
 /// one `R_parent · (cos θ₀·b + sin θ₀·a × b)`.
+#[inline(always)]
 fn world_axes(g: &Group, rp: Quat, rs: Quat) -> [Vec3; 3] {
     let [a, b, c] = g.axes;
     match g.count {
@@ -633,7 +650,7 @@ impl<const N: usize> Joints<N> {
 impl Dofs {
     /// Adds a link's curvature, gradient (for scaled residual `r`) and lever
     /// (its slot's `w / w_max`).
-    #[inline]
+    #[inline(always)]
     fn add(&mut self, l: &Link, r: Vec3, sw2: f32) {
         let c = l.cols;
         self.curvature += Vec3::new(
@@ -648,6 +665,7 @@ impl Dofs {
 
 /// The pivot and world axes of a group at the current pose (the translation's
 /// axes are its directions).
+#[inline(always)]
 pub(super) fn geometry<const N: usize>(work: &Work<'_, '_, N>, g: &Group) -> (Vec3, [Vec3; 3]) {
     let s = usize::from(g.seg);
     let poses = (
@@ -668,7 +686,7 @@ pub(super) fn geometry<const N: usize>(work: &Work<'_, '_, N>, g: &Group) -> (Ve
 /// stretched): for a goal pulling its point `x` with residual `r`,
 /// `r · (x − p)⊥ω`, the diagonal of the second-order term that makes a
 /// stretched limb stiff against turning.
-#[inline]
+#[inline(always)]
 fn columns(
     slot: &Slot,
     da: bool,

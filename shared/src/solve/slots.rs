@@ -181,6 +181,14 @@ impl Slot {
     /// Geometry and residual at the current pose; `None` on a bad index.
     fn refresh<const N: usize>(&mut self, goal: &Goal, work: &Work<'_, '_, N>) -> Option<()> {
         let (body, pose) = (work.body, &*work.pose);
+        if let (Target::Position(target), Frame::World) = (goal.target, goal.frame) {
+            // `Goal::evaluate`'s residual, with the point computed once.
+            self.x = goal.world_point(body, pose)?;
+            self.r = target - self.x;
+            self.g = self.x + self.r;
+            self.awake = true;
+            return Some(());
+        }
         match goal.evaluate(body, pose)? {
             Residual::Position(d) => {
                 self.x = goal.world_point(body, pose)?;

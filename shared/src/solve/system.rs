@@ -305,8 +305,9 @@ fn fill_in(coupled: &mut Coupling, n: usize) {
 }
 
 /// `a += C_t·diag(d)·C_sᵀ` on the lower block triangle, for every pair of a
-/// group's links to awake slots (links ascend by slot).
-#[inline]
+/// group's links to awake slots (links ascend by slot). Of a diagonal block
+/// only the lower triangle is kept: [`chol3_inverse`] reads no more.
+#[inline(always)]
 fn outer(a: &mut [Mat3], links: &[Link], awake: u16, d: Vec3) {
     for (i, lt) in links.iter().enumerate() {
         if awake >> lt.slot & 1 == 0 {
@@ -315,7 +316,7 @@ fn outer(a: &mut [Mat3], links: &[Link], awake: u16, d: Vec3) {
         let t = usize::from(lt.slot);
         let c = lt.cols;
         let (u0, u1, u2) = (c.x_axis * d.x, c.y_axis * d.y, c.z_axis * d.z);
-        for ls in links.iter().take(i + 1) {
+        for ls in links.iter().take(i) {
             if awake >> ls.slot & 1 == 0 {
                 continue;
             }
@@ -325,6 +326,13 @@ fn outer(a: &mut [Mat3], links: &[Link], awake: u16, d: Vec3) {
                 b.y_axis += u0 * c0.y + u1 * c1.y + u2 * c2.y;
                 b.z_axis += u0 * c0.z + u1 * c1.z + u2 * c2.z;
             }
+        }
+        if let Some(b) = a.get_mut(at(t, t)) {
+            let (c0, c1, c2) = (c.x_axis, c.y_axis, c.z_axis);
+            b.x_axis += u0 * c0.x + u1 * c1.x + u2 * c2.x;
+            b.y_axis.y += u0.y * c0.y + u1.y * c1.y + u2.y * c2.y;
+            b.y_axis.z += u0.z * c0.y + u1.z * c1.y + u2.z * c2.y;
+            b.z_axis.z += u0.z * c0.z + u1.z * c1.z + u2.z * c2.z;
         }
     }
 }
