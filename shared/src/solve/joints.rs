@@ -18,6 +18,7 @@
 
 use super::reach::bit;
 use super::slots::{Kind, MAX_GOALS, Slot, Slots};
+use super::tree::{clamp, larger};
 use super::{ReachTree, RootMode, SolveError, Solver, Work};
 use crate::body::{Axis, Segment};
 use crate::goal::Frame;
@@ -327,16 +328,49 @@ impl<const N: usize> Joints<N> {
         links_of(&self.links, g)
     }
 
-    /// Keeps the values of the moving DOFs and the root position, to go back
-    /// to with [`Joints::back`].
-    pub fn keep(&mut self, work: &Work<'_, '_, N>) {
-        self.back_root = work.angles.root_position;
-        for (d, g) in self.dofs.iter_mut().zip(&self.groups).take(self.count) {
-            d.back = Vec3::from_array(g.values(work));
+    /// Applies the step (each DOF's `delta`), scaled to at most `max_step`
+    /// (rad or m), clamped into the limits. With `keep`, first keeps the
+    /// values of the moving DOFs and the root position, to go back to with
+    /// [`Joints::back`].
+    pub fn apply(&mut self, work: &mut Work<'_, '_, N>, max_step: f32, keep: bool) {
+        let dofs = self.dofs.iter().take(self.count);
+        let biggest = dofs.fold(0.0f32, |m, d| larger(m, d.delta.abs().max_element()));
+        let scale = if biggest > max_step {
+            max_step / biggest
+        } else {
+            1.0
+        };
+        if keep {
+            self.back_root = work.angles.root_position;
+        }
+        for (g, d) in self
+            .groups
+            .iter()
+            .zip(self.dofs.iter_mut())
+            .take(self.count)
+        {
+            if g.translation() {
+                work.angles.root_position += d.delta * scale;
+                continue;
+            }
+            if let Some(values) = work.angles.get_mut(usize::from(g.seg)) {
+                if keep {
+                    d.back = Vec3::from_array(*values);
+                }
+                let limits = g.min.to_array().into_iter().zip(g.max.to_array());
+                for ((x, d), (min, max)) in values
+                    .iter_mut()
+                    .zip(d.delta.to_array())
+                    .zip(limits)
+                    .take(usize::from(g.count))
+                {
+                    *x = clamp(*x + d * scale, min, max);
+                }
+            }
         }
     }
 
-    /// Goes back to the values [`Joints::keep`] kept.
+    /// Goes back to the values [`Joints::apply`] kept.
     pub fn back(&self, work: &mut Work<'_, '_, N>) {
         work.angles.root_position = self.back_root;
         for (d, g) in self.dofs.iter().zip(&self.groups).take(self.count) {

@@ -46,6 +46,9 @@ pub(super) struct System {
     /// Bit `s` of entry `t`: block `(t, s)` of the factor may be nonzero
     /// (the goals share a moving joint, or fill-in).
     coupled: Coupling,
+    /// The awake slots `coupled` was found for, with the current joint
+    /// layout (`None`: not yet).
+    coupled_for: Option<u16>,
     /// Bit `j`: slot `j` takes part.
     awake: u16,
 }
@@ -65,8 +68,14 @@ impl System {
         a: [Mat3::ZERO; BLOCKS],
         l: [Mat3::ZERO; BLOCKS],
         coupled: [0; MAX_GOALS],
+        coupled_for: None,
         awake: 0,
     };
+
+    /// Forgets the coupling: the joint layout changed.
+    pub fn forget(&mut self) {
+        self.coupled_for = None;
+    }
 
     /// Computes the step (each group's `delta`) at damping `λ²` for the
     /// linearisation in `joints` and the residuals in `slots`; false if the
@@ -126,13 +135,23 @@ impl System {
                 }
             }
         }
-        self.coupled = [0; MAX_GOALS];
+        // Which goals share a joint depends only on the layout and the
+        // awake goals.
+        let known = self.coupled_for == Some(self.awake);
+        if !known {
+            self.coupled = [0; MAX_GOALS];
+        }
         for (g, d) in joints.groups().iter().zip(&joints.dofs) {
             let links = joints.links_of(g);
             outer(&mut self.a, links, self.awake, d.inv_d);
-            couple(&mut self.coupled, links, self.awake);
+            if !known {
+                couple(&mut self.coupled, links, self.awake);
+            }
         }
-        fill_in(&mut self.coupled, n);
+        if !known {
+            fill_in(&mut self.coupled, n);
+            self.coupled_for = Some(self.awake);
+        }
     }
 
     /// Wakes every standby plane whose point the step would carry through the

@@ -85,6 +85,7 @@ pub(super) fn solve<const N: usize>(
     lm.slots.init(work.goals, wmax)?;
     if !laid_out {
         lm.joints.init(solver, tree, work, &lm.slots);
+        lm.system.forget();
     }
     let (mut iterations, mut converged) = lm.run(solver, work)?;
     let tol2 = solver.tolerance * solver.tolerance;
@@ -133,7 +134,6 @@ impl<const N: usize> Lm<N> {
                 continue;
             }
             let (before, error) = (self.slots.residuals(), self.slots.error);
-            self.joints.keep(work);
             self.trial(solver, work)?;
             if self.slots.error < error {
                 self.slots.mark(&before);
@@ -159,16 +159,16 @@ impl<const N: usize> Lm<N> {
     /// evaluates the goals.
     fn trial(&mut self, solver: &Solver, work: &mut Work<'_, '_, N>) -> Result<(), SolveError> {
         let error = self.slots.error;
-        apply(work, &self.joints);
+        self.joints.apply(work, MAX_STEP, true);
         self.refresh(work)?;
         if solver.extrapolate && self.slots.error < error && self.slots.error > 0.25 * error {
             let once = self.slots.error;
-            apply(work, &self.joints);
+            self.joints.apply(work, MAX_STEP, false);
             self.refresh(work)?;
             if self.slots.error >= once {
                 // Back to the single step (applied again: the same numbers).
                 self.joints.back(work);
-                apply(work, &self.joints);
+                self.joints.apply(work, MAX_STEP, false);
                 self.refresh(work)?;
             }
         }
@@ -222,37 +222,9 @@ fn spread<const N: usize>(work: &mut Work<'_, '_, N>, joints: &Joints<N>, k: u8)
     }
 }
 
-/// Applies the step, scaled to at most [`MAX_STEP`], clamped into the limits.
-fn apply<const N: usize>(work: &mut Work<'_, '_, N>, joints: &Joints<N>) {
-    let dofs = joints.dofs.iter().take(joints.count);
-    let biggest = dofs.fold(0.0f32, |m, d| larger(m, d.delta.abs().max_element()));
-    let scale = if biggest > MAX_STEP {
-        MAX_STEP / biggest
-    } else {
-        1.0
-    };
-    for (g, d) in joints.groups().iter().zip(&joints.dofs) {
-        if g.translation() {
-            work.angles.root_position += d.delta * scale;
-            continue;
-        }
-        if let Some(values) = work.angles.get_mut(usize::from(g.seg)) {
-            let limits = g.min.to_array().into_iter().zip(g.max.to_array());
-            for ((x, d), (min, max)) in values
-                .iter_mut()
-                .zip(d.delta.to_array())
-                .zip(limits)
-                .take(usize::from(g.count))
-            {
-                *x = clamp(*x + d * scale, min, max);
-            }
-        }
-    }
-}
-
 /// `x` clamped into `[min, max]` (NaN becomes `min`), as [`crate::body::Dof::clamp`].
 #[inline]
-fn clamp(x: f32, min: f32, max: f32) -> f32 {
+pub(super) fn clamp(x: f32, min: f32, max: f32) -> f32 {
     if x >= max {
         max
     } else if x >= min {
@@ -264,6 +236,6 @@ fn clamp(x: f32, min: f32, max: f32) -> f32 {
 
 /// `b` if it is larger, else `a` (no libm call, unlike `f32::max`).
 #[inline]
-fn larger(a: f32, b: f32) -> f32 {
+pub(super) fn larger(a: f32, b: f32) -> f32 {
     if b > a { b } else { a }
 }
