@@ -43,26 +43,26 @@
 //! start (goals ≤ 3 cm from a reachable pose): the greedy chain solver leaves
 //! goals 48 mm away on average (the triangle rule swings the whole spine and
 //! then hits limits: the "local minima" the paper warns of); CCD, chain DLS and
-//! tree DLS all meet every goal to [`Solver::DEFAULT`]'s 0.1 mm, in 69, 19 and
-//! 7.5 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
+//! tree DLS all meet every goal to [`Solver::DEFAULT`]'s 0.1 mm, in 68, 19 and
+//! 6.7 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
 //! meets all goals on 30 of 32 problems (chain DLS and CCD 25). On the
 //! emulated Cortex-M4F (instruction counts, not cycles), tree DLS takes about
-//! 121 k instructions cold ([`solve`], 3 iterations) and 74 k warm (goals
+//! 119 k instructions cold ([`solve`], 3 iterations) and 72 k warm (goals
 //! moved ≤ 2 cm, [`solve_with`] with the [`SolverState`] of the previous
-//! frame, 2 iterations). One iteration is about 30 k: the columns and their
+//! frame, 2 iterations). One iteration is about 27.5 k: the columns and their
 //! sums 8.5 k, forward kinematics of the 20 segments the goals hang from 6 k,
-//! the 3×3 blocks 4.3 k, the step and its limits 4.2 k (two rounds when a
-//! joint limit clamps), the damping 1.6 k, applying the step 2 k, the
-//! factorisation 2.1 k. The iteration count is set by the problem's
-//! curvature, not the damping: a step from goals 1.5 cm away leaves about
-//! 2 mm (the limbs turn), the next one 0.02 mm. A fresh working state costs
-//! about 14 k before the first iteration (clearing 13 kB, the reach tree,
-//! the joint layout) and the first forward kinematics 6 k; a kept state
-//! skips the first three while the goals stay on the same segments, and a
-//! start at the last solution skips the sines and cosines of the first
-//! forward kinematics (each joint's rotation is kept with its angles). The
-//! final pose and the report cost about 2.5 k. Fewer moving DOFs or goals
-//! cost proportionally less.
+//! the step and its limits 4.5 k (two rounds when a joint limit clamps), the
+//! 3×3 blocks 3.5 k, the factorisation 2.3 k, the damping 1.6 k, applying the
+//! step 1 k. The iteration count is set by the problem's curvature, not the
+//! damping: a step from goals 1.5 cm away leaves about 2 mm (the limbs turn),
+//! the next one 0.02 mm. A fresh working state costs about 14 k before the
+//! first iteration (clearing 13 kB, the reach tree, the joint layout) and the
+//! first forward kinematics 6 k; a kept state skips the first three while the
+//! goals stay on the same segments, and a start at the last solution skips
+//! the sines and cosines of the first forward kinematics (each joint's
+//! rotation is kept with its angles), leaving about 2.5 k of it. The final
+//! pose and the report cost about 2.5 k. Fewer moving DOFs or goals cost
+//! proportionally less.
 //!
 //! Tree DLS is a local method: on 100 random CMU goal sets (`tests/solve.rs`)
 //! it ends at a local optimum every time, and with [`Solver::restarts`] = 3
