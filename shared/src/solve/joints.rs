@@ -323,11 +323,6 @@ impl<const N: usize> Joints<N> {
         self.groups.get(..self.count).unwrap_or(&[])
     }
 
-    /// The links of group `g`.
-    pub fn links_of(&self, g: &Group) -> &[Link] {
-        links_of(&self.links, g)
-    }
-
     /// Applies the step (each DOF's `delta`), scaled to at most `max_step`
     /// (rad or m), clamped into the limits. With `keep`, first keeps the
     /// values of the moving DOFs and the root position, to go back to with
@@ -650,7 +645,9 @@ impl<const N: usize> Joints<N> {
                 };
                 if slot.awake {
                     d.add(&link, slot.r * slot.sw, slot.sw * slot.sw);
-                    d.tension += t * (slot.sw * slot.sw);
+                    if slot.stretched {
+                        d.tension += t * (slot.sw * slot.sw);
+                    }
                 }
                 *links.get_mut(used).ok_or(SolveError::TooManyGoals)? = link;
                 used += 1;
@@ -850,7 +847,7 @@ mod tests {
         };
         let mut checked = 0;
         for g in joints.groups() {
-            for l in joints.links_of(g) {
+            for l in links_of(&joints.links, g) {
                 let slot = slots.s[usize::from(l.slot)];
                 let goal = &goals[usize::from(slot.goal)];
                 for k in 0..usize::from(g.count) {

@@ -23,7 +23,7 @@
 //! the step only if the step would carry its point through the plane.
 
 use super::Work;
-use super::joints::{Joints, Link, entry, geometry, links_of};
+use super::joints::{Dofs, Joints, Link, entry, geometry, links_of};
 use super::slots::{MAX_GOALS, Rhs, Slots};
 use crate::math;
 use glam::{Mat3, Vec3};
@@ -93,8 +93,7 @@ impl System {
             if round > 0 {
                 joints.sums(slots, self.awake, &r);
             }
-            damp(joints, lambda2);
-            self.assemble(joints, slots.count);
+            self.assemble(joints, slots.count, lambda2);
             if !self.solve(joints, slots.count, &r) {
                 return false;
             }
@@ -126,8 +125,9 @@ impl System {
         true
     }
 
-    /// `J̃·D⁻¹·J̃ᵀ + I` over the DOFs that take part.
-    fn assemble<const N: usize>(&mut self, joints: &Joints<N>, n: usize) {
+    /// Every DOF's damping ([`damp`]) and `J̃·D⁻¹·J̃ᵀ + I` over the DOFs
+    /// that take part.
+    fn assemble<const N: usize>(&mut self, joints: &mut Joints<N>, n: usize, lambda2: f32) {
         for t in 0..n {
             for s in 0..=t {
                 if let Some(b) = self.a.get_mut(at(t, s)) {
@@ -141,8 +141,14 @@ impl System {
         if !known {
             self.coupled = [0; MAX_GOALS];
         }
-        for (g, d) in joints.groups().iter().zip(&joints.dofs) {
-            let links = joints.links_of(g);
+        for (g, d) in joints
+            .groups
+            .iter()
+            .zip(joints.dofs.iter_mut())
+            .take(joints.count)
+        {
+            damp(d, lambda2);
+            let links = links_of(&joints.links, g);
             outer(&mut self.a, links, self.awake, d.inv_d);
             if !known {
                 couple(&mut self.coupled, links, self.awake);
@@ -189,26 +195,25 @@ impl System {
     }
 }
 
-/// Every DOF's `1 / D` (0 for one held at a limit that the gradient pushes
-/// outwards); a zero step. A DOF a group does not have has a zero column and
-/// moves nothing.
-fn damp<const N: usize>(joints: &mut Joints<N>, lambda2: f32) {
+/// A group's `1 / D` per DOF (0 for one held at a limit that the gradient
+/// pushes outwards); a zero step. A DOF a group does not have has a zero
+/// column and moves nothing.
+#[inline(always)]
+fn damp(d: &mut Dofs, lambda2: f32) {
     let floor = LEVER * LEVER * lambda2;
-    for d in joints.dofs.iter_mut().take(joints.count) {
-        let damping = d.curvature * lambda2 + Vec3::splat(floor * d.lever) + d.tension;
-        let inv = |damping: f32, grad: f32, lo: f32, hi: f32| {
-            // Held: on a limit (within 1e-6) that the gradient pushes through.
-            let held = (hi <= 1e-6 && grad > 0.0) || (lo >= -1e-6 && grad < 0.0);
-            if held { 0.0 } else { 1.0 / (damping + 1e-12) }
-        };
-        let (g, lo, hi) = (d.grad, d.lo, d.hi);
-        d.inv_d = Vec3::new(
-            inv(damping.x, g.x, lo.x, hi.x),
-            inv(damping.y, g.y, lo.y, hi.y),
-            inv(damping.z, g.z, lo.z, hi.z),
-        );
-        d.delta = Vec3::ZERO;
-    }
+    let damping = d.curvature * lambda2 + Vec3::splat(floor * d.lever) + d.tension;
+    let inv = |damping: f32, grad: f32, lo: f32, hi: f32| {
+        // Held: on a limit (within 1e-6) that the gradient pushes through.
+        let held = (hi <= 1e-6 && grad > 0.0) || (lo >= -1e-6 && grad < 0.0);
+        if held { 0.0 } else { 1.0 / (damping + 1e-12) }
+    };
+    let (g, lo, hi) = (d.grad, d.lo, d.hi);
+    d.inv_d = Vec3::new(
+        inv(damping.x, g.x, lo.x, hi.x),
+        inv(damping.y, g.y, lo.y, hi.y),
+        inv(damping.z, g.z, lo.z, hi.z),
+    );
+    d.delta = Vec3::ZERO;
 }
 
 /// The step `D⁻¹·J̃ᵀ·y` of every DOF that takes part; unless `last`, DOFs
