@@ -47,12 +47,12 @@
 //! 6.7 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
 //! meets all goals on 30 of 32 problems (chain DLS and CCD 25). On the
 //! emulated Cortex-M4F (instruction counts, not cycles), tree DLS takes about
-//! 119 k instructions cold ([`solve`], 3 iterations) and 72 k warm (goals
+//! 117 k instructions cold ([`solve`], 3 iterations) and 71 k warm (goals
 //! moved ≤ 2 cm, [`solve_with`] with the [`SolverState`] of the previous
-//! frame, 2 iterations). One iteration is about 27.5 k: the columns and their
-//! sums 8.5 k, forward kinematics of the 20 segments the goals hang from 6 k,
+//! frame, 2 iterations). One iteration is about 27 k: the columns and their
+//! sums 8.3 k, forward kinematics of the 20 segments the goals hang from 6 k,
 //! the step and its limits 4.5 k (two rounds when a joint limit clamps), the
-//! 3×3 blocks 3.5 k, the factorisation 2.3 k, the damping 1.6 k, applying the
+//! 3×3 blocks and the damping 4.8 k, the factorisation 2.3 k, applying the
 //! step 1 k. The iteration count is set by the problem's curvature, not the
 //! damping: a step from goals 1.5 cm away leaves about 2 mm (the limbs turn),
 //! the next one 0.02 mm. A fresh working state costs about 14 k before the
