@@ -17,8 +17,8 @@
 //! computes it again only when they change (bit for bit the same numbers).
 
 use super::reach::bit;
-use super::slots::{Kind, MAX_GOALS, Slot, Slots};
-use super::tree::{clamp, larger};
+use super::slots::{Kind, MAX_GOALS, Slot, Slots, larger};
+use super::tree::clamp;
 use super::{ReachTree, RootMode, SolveError, Solver, Work};
 use crate::body::{Axis, Segment};
 use crate::goal::Frame;

@@ -29,7 +29,7 @@
 //! joints' ranges, and the lowest error wins.
 
 use super::joints::Joints;
-use super::slots::Slots;
+use super::slots::{Slots, larger};
 use super::system::System;
 use super::{ReachTree, SolveError, Solver, Work};
 
@@ -232,10 +232,4 @@ pub(super) fn clamp(x: f32, min: f32, max: f32) -> f32 {
     } else {
         min
     }
-}
-
-/// `b` if it is larger, else `a` (no libm call, unlike `f32::max`).
-#[inline]
-pub(super) fn larger(a: f32, b: f32) -> f32 {
-    if b > a { b } else { a }
 }
