@@ -176,7 +176,6 @@ impl Group {
 }
 
 /// The moving joints, their state and their columns.
-#[derive(Clone)]
 pub(super) struct Joints<const N: usize> {
     pub groups: [Group; N],
     pub dofs: [Dofs; N],

@@ -365,7 +365,6 @@ pub fn solve_with<const N: usize, const G: usize>(
 /// capacity `N`: about 280 bytes per segment of capacity plus 5 kB (13.5 kB
 /// for `N` = 31, 23 kB for `N` = 64). Nothing in it changes a result: a solve
 /// with a kept state is bit-identical to one with a new state.
-#[derive(Clone)]
 pub struct SolverState<const N: usize> {
     tree: ReachTree<N>,
     lm: tree::Lm<N>,

@@ -39,7 +39,6 @@ const BLOCKS: usize = MAX_GOALS * (MAX_GOALS + 1) / 2;
 
 /// The lower block triangle of `J̃·D⁻¹·J̃ᵀ + I`, packed by rows: block
 /// `(t, s)`, `s ≤ t`, at `t·(t+1)/2 + s`; and its factor.
-#[derive(Clone)]
 pub(super) struct System {
     a: [Mat3; BLOCKS],
     l: [Mat3; BLOCKS],

@@ -45,7 +45,6 @@ const MAX_STEP: f32 = 1.0;
 
 /// The state of a whole-tree solve, built in place and kept between solves
 /// (inside a [`super::SolverState`]).
-#[derive(Clone)]
 pub(super) struct Lm<const N: usize> {
     joints: Joints<N>,
     slots: Slots,
