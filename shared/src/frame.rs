@@ -46,12 +46,22 @@
 //! fail-safe timeout, every servo eases to its rest pulse within its slew
 //! limits. The same happens after `Disarm`. A board without a valid rig and
 //! table refuses to arm and reports why in its [`Status`].
+//!
+//! ## Capacity
+//!
+//! [`Region`] and [`Performer`] hold the rig, poses, joint angles and the
+//! solver's state for at most `N` segments, a const parameter (default
+//! [`MAX_SEGMENTS`], the rig format's limit). A firmware picks the smallest
+//! that fits its rigs, `Region::<32>::parse_sized` and `Performer<'_, '_, 32>`
+//! (the shipped `humanoid16` and `cmu31` rigs fit): RAM and per-frame copies
+//! scale with it. A rig with more segments is refused as
+//! [`StatusReason::RigTooLarge`], like a missing rig.
 
 use crate::body::{Angles, Body};
 use crate::goal::GoalSet;
 use crate::grid::{Adjust, Grid};
 use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
-use crate::rig::{MAX_PARAMS, Rig};
+use crate::rig::{MAX_PARAMS, Rig, RigError};
 use crate::servo::{Slew, quarter_us};
 use crate::solve::{self, Solver};
 use crate::table::{Kind, Table, TableError};
@@ -61,6 +71,11 @@ use crate::wire::{
     ValidTrackerFrame,
 };
 use glam::Quat;
+
+/// The live loop's solver. A constant, so that a firmware links only the
+/// method it runs ([`Solver::DEFAULT`]'s whole-tree DLS), not the balancing
+/// solvers the host compares it with.
+const SOLVER: Solver = Solver::DEFAULT;
 
 /// A telemetry message goes out after every this many output frames.
 pub const TELEMETRY_EVERY: u32 = 10;
@@ -118,11 +133,12 @@ impl Cycles for NoCycles {
 }
 
 /// The validated contents of the table region: the rig blob, then the table
-/// blob at the next 4-byte boundary.
+/// blob at the next 4-byte boundary. The rig has capacity `N` (see
+/// [Capacity](self#capacity)).
 #[derive(Clone, Debug)]
-pub struct Region<'a> {
-    /// The rig, if its blob is valid.
-    pub rig: Option<Rig<'a>>,
+pub struct Region<'a, const N: usize = MAX_SEGMENTS> {
+    /// The rig, if its blob is valid (and fits the capacity).
+    pub rig: Option<Rig<'a, N>>,
     /// The table, if its blob is valid and matches the rig.
     pub table: Option<Table<'a>>,
     /// Why the board cannot arm ([`StatusReason::Ok`] if it can).
@@ -131,15 +147,32 @@ pub struct Region<'a> {
 
 impl<'a> Region<'a> {
     /// Validates a table region (magic, version, CRC and bounds of both
-    /// blobs, and that the table was built for this rig).
+    /// blobs, and that the table was built for this rig), at the rig
+    /// format's capacity; [`Region::parse_sized`] reads it into a smaller
+    /// rig.
     #[must_use]
     pub fn parse(bytes: &'a [u8]) -> Self {
-        let Ok((rig, rest)) = Rig::parse(bytes) else {
-            return Self {
-                rig: None,
-                table: None,
-                reason: StatusReason::NoRig,
-            };
+        Self::parse_sized(bytes)
+    }
+}
+
+impl<'a, const N: usize> Region<'a, N> {
+    /// [`Region::parse`] with a rig of capacity `N`: a valid rig with more
+    /// segments is refused with [`StatusReason::RigTooLarge`].
+    #[must_use]
+    pub fn parse_sized(bytes: &'a [u8]) -> Self {
+        let (rig, rest) = match Rig::parse_sized(bytes) {
+            Ok(parsed) => parsed,
+            Err(e) => {
+                return Self {
+                    rig: None,
+                    table: None,
+                    reason: match e {
+                        RigError::Capacity { .. } => StatusReason::RigTooLarge,
+                        _ => StatusReason::NoRig,
+                    },
+                };
+            }
         };
         let pad = (4 - (bytes.len() - rest.len()) % 4) % 4;
         let table_bytes = rest.get(pad..).unwrap_or(&[]);
@@ -167,7 +200,7 @@ impl<'a> Region<'a> {
 }
 
 /// Whether a valid table can drive this rig.
-fn check_table(rig: &Rig<'_>, table: &Table<'_>) -> StatusReason {
+fn check_table<const N: usize>(rig: &Rig<'_, N>, table: &Table<'_>) -> StatusReason {
     if table.rig_hash() != rig.rig_hash() || table.segment_count() != rig.body().len() {
         StatusReason::RigMismatch
     } else if table.kind() != Kind::Grid || table.axes().len() > MAX_PARAMS {
@@ -207,16 +240,16 @@ fn table_reason(e: TableError) -> StatusReason {
 /// correction is dropped when a solve fails and when the loop disarms or
 /// times out.
 #[derive(Clone, Copy, Debug)]
-struct Correction {
-    values: [[f32; 3]; MAX_SEGMENTS],
+struct Correction<const N: usize> {
+    values: [[f32; 3]; N],
     root_shift: glam::Vec3,
     root_turn: Quat,
 }
 
-impl Correction {
+impl<const N: usize> Correction<N> {
     /// `solved − synth`.
-    fn between(synth: &Angles<MAX_SEGMENTS>, solved: &Angles<MAX_SEGMENTS>) -> Self {
-        let mut values = [[0.0; 3]; MAX_SEGMENTS];
+    fn between(synth: &Angles<N>, solved: &Angles<N>) -> Self {
+        let mut values = [[0.0; 3]; N];
         for ((c, a), b) in values.iter_mut().zip(&solved.values).zip(&synth.values) {
             for ((c, a), b) in c.iter_mut().zip(a).zip(b) {
                 *c = a - b;
@@ -231,13 +264,8 @@ impl Correction {
 
     /// Adds the correction to `angles` on the joints the active goals hang
     /// from, then clamps into the joint limits.
-    fn apply(
-        &self,
-        body: &Body<'_>,
-        goals: &GoalSet<MAX_GOALS>,
-        angles: &mut Angles<MAX_SEGMENTS>,
-    ) {
-        let mut pulled = [false; MAX_SEGMENTS];
+    fn apply(&self, body: &Body<'_>, goals: &GoalSet<MAX_GOALS>, angles: &mut Angles<N>) {
+        let mut pulled = [false; N];
         for g in goals.as_slice().iter().filter(|g| g.weight > 0.0) {
             let mut s = usize::from(g.segment);
             while let Some(mark) = pulled.get_mut(s) {
@@ -271,13 +299,12 @@ impl Correction {
     }
 }
 
-/// The live loop of one rig (see the module doc).
-pub struct Performer<'r, 'a> {
-    rig: &'r Rig<'a>,
+/// The live loop of one rig, for at most `N` segments (see the module doc).
+pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
+    rig: &'r Rig<'a, N>,
     table: Option<&'r Table<'a>>,
     grid: Option<Grid<'a>>,
     reason: StatusReason,
-    solver: Solver,
     receiver: Receiver,
     armed: bool,
     resting: bool,
@@ -289,11 +316,11 @@ pub struct Performer<'r, 'a> {
     boresight: [Quat; MAX_SENSORS],
     last_sensors: List<Sensor, MAX_SENSORS>,
     goals: GoalSet<MAX_GOALS>,
-    angles: Angles<MAX_SEGMENTS>,
-    warm: Option<Correction>,
-    synth: Pose<MAX_SEGMENTS>,
-    pose: Pose<MAX_SEGMENTS>,
-    local: LocalPose<MAX_SEGMENTS>,
+    angles: Angles<N>,
+    warm: Option<Correction<N>>,
+    synth: Pose<N>,
+    pose: Pose<N>,
+    local: LocalPose<N>,
     slews: [Option<Slew>; MAX_SERVOS],
     targets: [u16; MAX_SERVOS],
     channels: usize,
@@ -305,11 +332,11 @@ pub struct Performer<'r, 'a> {
     disarms: u32,
 }
 
-impl<'r, 'a> Performer<'r, 'a> {
+impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     /// A loop for `region`'s rig (disarmed; servos assumed at rest). Returns
     /// `None` when the region holds no valid rig: there is nothing to drive.
     #[must_use]
-    pub fn new(region: &'r Region<'a>) -> Option<Self> {
+    pub fn new(region: &'r Region<'a, N>) -> Option<Self> {
         let rig = region.rig.as_ref()?;
         let grid = region.table.as_ref().and_then(|t| t.grid().ok());
         let reason = match (region.reason, &grid) {
@@ -339,7 +366,6 @@ impl<'r, 'a> Performer<'r, 'a> {
             table: region.table.as_ref(),
             grid,
             reason,
-            solver: Solver::DEFAULT,
             receiver: Receiver::new(),
             armed: false,
             resting: true,
@@ -423,7 +449,7 @@ impl<'r, 'a> Performer<'r, 'a> {
 
     /// The current world pose of the figure (solved, or rest).
     #[must_use]
-    pub fn pose(&self) -> &Pose<MAX_SEGMENTS> {
+    pub fn pose(&self) -> &Pose<N> {
         &self.pose
     }
 
@@ -703,7 +729,7 @@ impl<'r, 'a> Performer<'r, 'a> {
             c.apply(&body, &self.goals, &mut self.angles);
         }
         match solve::solve(
-            &self.solver,
+            &SOLVER,
             &body,
             &self.goals,
             &mut self.angles,

@@ -57,6 +57,14 @@
 //! `[w, x, y, z]`, as everywhere in Marionette. A segment's frame is at its
 //! joint origin; at rest (all angles zero) every frame is parallel to the
 //! root's (see [`crate::body`]).
+//!
+//! # Capacity
+//!
+//! A [`Rig`] holds its segment arrays and rest pose for at most `N` segments
+//! (a const parameter, default [`MAX_SEGMENTS`], the format's limit). A board
+//! with little RAM instantiates a smaller one, e.g. `Rig<'_, 32>` (every
+//! shipped rig fits): [`Rig::parse_sized`] and [`Rig::from_desc_sized`]
+//! refuse a rig with more segments with [`RigError::Capacity`].
 
 mod desc;
 pub mod sensor;
@@ -175,6 +183,14 @@ pub enum RigError {
     /// The body module refused the skeleton (cannot happen after validation;
     /// kept so that no error is swallowed).
     Body(BodyError),
+    /// The rig is valid but has more segments than the [`Rig`]'s capacity
+    /// `N` (the build's limit, below the format's [`MAX_SEGMENTS`]).
+    Capacity {
+        /// The rig's segments.
+        segments: u8,
+        /// The capacity.
+        capacity: u8,
+    },
 }
 
 impl From<BodyError> for RigError {
@@ -309,10 +325,10 @@ const EMPTY_SEGMENT: Segment<'static> = Segment {
 };
 
 /// A rig ready for the live loop: the arrays a [`Body`] borrows, the rest
-/// pose, the servo channels and the sensor mapping. Names borrow from the
-/// blob (`'a`).
+/// pose, the servo channels and the sensor mapping, for at most `N` segments
+/// (see [Capacity](self#capacity)). Names borrow from the blob (`'a`).
 #[derive(Clone, Debug)]
-pub struct Rig<'a> {
+pub struct Rig<'a, const N: usize = MAX_SEGMENTS> {
     name: &'a str,
     frame_period_us: u32,
     failsafe_timeout_ms: u32,
@@ -320,10 +336,10 @@ pub struct Rig<'a> {
     root_position: Vec3,
     root_rotation: Quat,
     count: usize,
-    segments: [Segment<'a>; MAX_SEGMENTS],
-    parents: [u8; MAX_SEGMENTS],
-    offsets: [Vec3; MAX_SEGMENTS],
-    rest: Pose<MAX_SEGMENTS>,
+    segments: [Segment<'a>; N],
+    parents: [u8; N],
+    offsets: [Vec3; N],
+    rest: Pose<N>,
     servos: List<ServoDesc, MAX_SERVOS>,
     params: List<ParamMap, MAX_PARAMS>,
     goals: List<GoalMap, MAX_GOALS>,
@@ -351,15 +367,47 @@ fn unit_quat(q: Quat) -> Quat {
 impl<'a> Rig<'a> {
     /// Checks and decodes a rig blob (see the module doc); returns the rig and
     /// the bytes after the blob. Every field is validated
-    /// ([`RigDesc::validate`]); nothing panics on any input.
+    /// ([`RigDesc::validate`]); nothing panics on any input. The rig has the
+    /// format's capacity; [`Rig::parse_sized`] makes a smaller one.
     pub fn parse(bytes: &'a [u8]) -> Result<(Self, &'a [u8]), RigError> {
-        let (desc, rest) = RigDesc::from_blob(bytes)?;
-        Ok((Self::from_desc(&desc)?, rest))
+        Self::parse_sized(bytes)
     }
 
-    /// Validates a description and builds the runtime rig.
+    /// Validates a description and builds the runtime rig (at the format's
+    /// capacity; see [`Rig::from_desc_sized`]).
     pub fn from_desc(desc: &RigDesc<'a>) -> Result<Self, RigError> {
+        Self::from_desc_sized(desc)
+    }
+
+    /// The joint angle a servo follows, from a joint state (`None` if the
+    /// state does not cover the servo's segment).
+    #[must_use]
+    pub fn servo_angle<const N: usize>(servo: &ServoDesc, angles: &Angles<N>) -> Option<f32> {
+        angles
+            .get(usize::from(servo.segment))?
+            .get(usize::from(servo.dof))
+            .copied()
+    }
+}
+
+impl<'a, const N: usize> Rig<'a, N> {
+    /// [`Rig::parse`] into a rig of capacity `N`: a valid rig with more than
+    /// `N` segments is refused with [`RigError::Capacity`].
+    pub fn parse_sized(bytes: &'a [u8]) -> Result<(Self, &'a [u8]), RigError> {
+        let (desc, rest) = RigDesc::from_blob(bytes)?;
+        Ok((Self::from_desc_sized(&desc)?, rest))
+    }
+
+    /// [`Rig::from_desc`] into a rig of capacity `N`: a valid rig with more
+    /// than `N` segments is refused with [`RigError::Capacity`].
+    pub fn from_desc_sized(desc: &RigDesc<'a>) -> Result<Self, RigError> {
         desc.validate()?;
+        if desc.segments.len() > N {
+            return Err(RigError::Capacity {
+                segments: u8::try_from(desc.segments.len()).unwrap_or(u8::MAX),
+                capacity: u8::try_from(N).unwrap_or(u8::MAX),
+            });
+        }
         let mut rig = Rig {
             name: desc.name,
             frame_period_us: desc.frame_period_us,
@@ -368,9 +416,9 @@ impl<'a> Rig<'a> {
             root_position: Vec3::from_array(desc.root_position),
             root_rotation: unit_quat(quat_wxyz(desc.root_rotation)),
             count: desc.segments.len(),
-            segments: [EMPTY_SEGMENT; MAX_SEGMENTS],
-            parents: [NO_PARENT; MAX_SEGMENTS],
-            offsets: [Vec3::ZERO; MAX_SEGMENTS],
+            segments: [EMPTY_SEGMENT; N],
+            parents: [NO_PARENT; N],
+            offsets: [Vec3::ZERO; N],
             rest: Pose::default(),
             servos: desc.servos,
             params: desc.params,
@@ -398,10 +446,10 @@ impl<'a> Rig<'a> {
         Ok(rig)
     }
 
-    fn compute_rest(&self) -> Result<Pose<MAX_SEGMENTS>, RigError> {
+    fn compute_rest(&self) -> Result<Pose<N>, RigError> {
         let body = self.body();
         body.validate()?;
-        let angles = self.rest_angles::<MAX_SEGMENTS>()?;
+        let angles = self.rest_angles::<N>()?;
         let mut local = LocalPose::default();
         let mut pose = Pose::default();
         angles.forward(&body, &mut local, &mut pose)?;
@@ -488,8 +536,8 @@ impl<'a> Rig<'a> {
 
     /// The rest joint state: the root at its rest placement, every angle zero
     /// clamped into its limits.
-    pub fn rest_angles<const N: usize>(&self) -> Result<Angles<N>, BodyError> {
-        let mut a = Angles::<N>::rest(&self.body())?;
+    pub fn rest_angles<const M: usize>(&self) -> Result<Angles<M>, BodyError> {
+        let mut a = Angles::<M>::rest(&self.body())?;
         a.root_position = self.root_position;
         a.root_rotation = self.root_rotation;
         Ok(a)
@@ -497,18 +545,8 @@ impl<'a> Rig<'a> {
 
     /// The world pose of [`Rig::rest_angles`].
     #[must_use]
-    pub fn rest_pose(&self) -> &Pose<MAX_SEGMENTS> {
+    pub fn rest_pose(&self) -> &Pose<N> {
         &self.rest
-    }
-
-    /// The joint angle a servo follows, from a joint state (`None` if the
-    /// state does not cover the servo's segment).
-    #[must_use]
-    pub fn servo_angle<const N: usize>(servo: &ServoDesc, angles: &Angles<N>) -> Option<f32> {
-        angles
-            .get(usize::from(servo.segment))?
-            .get(usize::from(servo.dof))
-            .copied()
     }
 }
 
