@@ -54,14 +54,23 @@ impl<B: Board> Cycles for BoardCycles<'_, B> {
 /// Runs the loop until the session ends (emulated board) or forever.
 pub fn run<B: Board>(board: &mut B) -> Outcome {
     let region = Region::<SEGMENTS>::parse_sized(board.tables());
-    match Performer::new(&region) {
-        Some(mut performer) => {
+    drive(board, &region)
+}
+
+/// Drives the region's rig, or idles without one. Not inlined into [`run`],
+/// so that the performer's stack frame is not below the region parse's.
+#[inline(never)]
+fn drive<B: Board>(board: &mut B, region: &Region<'_, SEGMENTS>) -> Outcome {
+    // Used in place: the performer is too big to move around on the stack.
+    let mut performer = Performer::new(region);
+    match performer.as_mut() {
+        Some(performer) => {
             if let Some(rig) = &region.rig
                 && !board.supports(&rig.output())
             {
                 performer.refuse(StatusReason::Unsupported);
             }
-            perform(board, &mut performer)
+            perform(board, performer)
         }
         None => idle(board, region.reason),
     }

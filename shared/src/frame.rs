@@ -159,7 +159,11 @@ impl<'a> Region<'a> {
 impl<'a, const N: usize> Region<'a, N> {
     /// [`Region::parse`] with a rig of capacity `N`: a valid rig with more
     /// segments is refused with [`StatusReason::RigTooLarge`].
+    ///
+    /// Never inlined: the decoding's temporaries live in this call's stack
+    /// frame, not in the caller's for the rest of its life.
     #[must_use]
+    #[inline(never)]
     pub fn parse_sized(bytes: &'a [u8]) -> Self {
         let (rig, rest) = match Rig::parse_sized(bytes) {
             Ok(parsed) => parsed,
@@ -335,7 +339,9 @@ pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
 impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     /// A loop for `region`'s rig (disarmed; servos assumed at rest). Returns
     /// `None` when the region holds no valid rig: there is nothing to drive.
+    /// Never inlined, like [`Region::parse_sized`].
     #[must_use]
+    #[inline(never)]
     pub fn new(region: &'r Region<'a, N>) -> Option<Self> {
         let rig = region.rig.as_ref()?;
         let grid = region.table.as_ref().and_then(|t| t.grid().ok());

@@ -262,10 +262,39 @@ impl<'a> RigDesc<'a> {
     /// Decodes a blob's description without validating it (for inspection);
     /// returns it and the bytes after the blob.
     pub fn from_blob(bytes: &'a [u8]) -> Result<(Self, &'a [u8]), RigError> {
+        Self::from_blob_sized(bytes)
+    }
+}
+
+/// The head of a description, up to the length of its segment list: the
+/// fields of [`RigDesc`] before `segments`, in order (postcard writes a list
+/// length as the same varint as a `u32`).
+type DescHead<'a> = (&'a str, u32, u32, [f32; 3], [f32; 4], Output, u32);
+
+impl<'a, const N: usize> RigDesc<'a, N> {
+    /// [`RigDesc::from_blob`] into a segment list of capacity `N`: a
+    /// description that does not decode at this capacity but whose segment
+    /// count is above `N` (and within the format's [`MAX_SEGMENTS`]) is
+    /// refused with [`RigError::Capacity`] (the envelope's CRC has already
+    /// been checked, so that is what it holds). Never inlined: the decoder's
+    /// temporaries stay in this call's stack frame.
+    #[inline(never)]
+    pub(crate) fn from_blob_sized(bytes: &'a [u8]) -> Result<(Self, &'a [u8]), RigError> {
         let (desc, rest) = envelope(bytes)?;
-        match postcard::take_from_bytes::<RigDesc<'a>>(desc) {
+        match postcard::take_from_bytes::<Self>(desc) {
             Ok((d, [])) => Ok((d, rest)),
-            _ => Err(RigError::Decode),
+            Ok(_) => Err(RigError::Decode),
+            Err(_) => match postcard::take_from_bytes::<DescHead<'a>>(desc) {
+                Ok(((.., segments), _))
+                    if usize::try_from(segments).is_ok_and(|s| N < s && s <= MAX_SEGMENTS) =>
+                {
+                    Err(RigError::Capacity {
+                        segments: u8::try_from(segments).unwrap_or(u8::MAX),
+                        capacity: u8::try_from(N).unwrap_or(u8::MAX),
+                    })
+                }
+                _ => Err(RigError::Decode),
+            },
         }
     }
 
@@ -394,13 +423,15 @@ impl<'a, const N: usize> Rig<'a, N> {
     /// [`Rig::parse`] into a rig of capacity `N`: a valid rig with more than
     /// `N` segments is refused with [`RigError::Capacity`].
     pub fn parse_sized(bytes: &'a [u8]) -> Result<(Self, &'a [u8]), RigError> {
-        let (desc, rest) = RigDesc::from_blob(bytes)?;
+        let (desc, rest) = RigDesc::<N>::from_blob_sized(bytes)?;
         Ok((Self::from_desc_sized(&desc)?, rest))
     }
 
     /// [`Rig::from_desc`] into a rig of capacity `N`: a valid rig with more
-    /// than `N` segments is refused with [`RigError::Capacity`].
-    pub fn from_desc_sized(desc: &RigDesc<'a>) -> Result<Self, RigError> {
+    /// than `N` segments is refused with [`RigError::Capacity`]. Never
+    /// inlined: its temporaries stay in this call's stack frame.
+    #[inline(never)]
+    pub fn from_desc_sized<const M: usize>(desc: &RigDesc<'a, M>) -> Result<Self, RigError> {
         desc.validate()?;
         if desc.segments.len() > N {
             return Err(RigError::Capacity {
