@@ -717,13 +717,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         if pose::to_local(&body.hierarchy(), &self.synth, &mut self.local).is_err() {
             return false;
         }
-        match Angles::from_local(&body, &self.local) {
-            Ok(a) => {
-                self.angles = a;
-                true
-            }
-            Err(_) => false,
-        }
+        self.angles.set_from_local(&body, &self.local).is_ok()
     }
 
     /// Solves the goals, warm-started (see [`Correction`]). False if it

@@ -675,24 +675,49 @@ impl<const N: usize> Angles<N> {
 
     /// Projects a local pose (e.g. a synthesized one, converted with
     /// [`pose::to_local`]) onto the joints' degrees of freedom, within limits.
-    /// The root keeps its full placement.
+    /// The root keeps its full placement. Like [`Angles::to_local`], this
+    /// trusts the body's structure (see [`Body::validate`]).
     pub fn from_local(body: &Body<'_>, local: &LocalPose<N>) -> Result<Self, BodyError> {
-        let mut a = Self::rest(body)?;
+        let mut a = Angles {
+            count: 0,
+            root_position: Vec3::ZERO,
+            root_rotation: Quat::IDENTITY,
+            values: [[0.0; 3]; N],
+        };
+        a.set_from_local(body, local)?;
+        Ok(a)
+    }
+
+    /// [`Angles::from_local`] in place (the live loop's per-frame
+    /// conversion, without a copy of the state). On an error `self` is left
+    /// unchanged.
+    pub fn set_from_local(
+        &mut self,
+        body: &Body<'_>,
+        local: &LocalPose<N>,
+    ) -> Result<(), BodyError> {
+        if body.is_empty() {
+            return Err(BodyError::Empty);
+        }
+        let Some((used, unused)) = self.values.split_at_mut_checked(body.len()) else {
+            return Err(BodyError::TooManySegments);
+        };
         if local.count != body.len() {
             return Err(BodyError::CountMismatch);
         }
-        a.root_position = local.root_position;
-        a.root_rotation = local.rotations.first().copied().unwrap_or(Quat::IDENTITY);
-        for ((v, s), &q) in a
-            .values
+        self.count = body.len();
+        self.root_position = local.root_position;
+        self.root_rotation = local.rotations.first().copied().unwrap_or(Quat::IDENTITY);
+        for (i, ((v, s), &q)) in used
             .iter_mut()
             .zip(body.segments)
             .zip(&local.rotations)
-            .skip(1)
+            .enumerate()
         {
-            *v = s.joint.project(q);
+            *v = if i == 0 { [0.0; 3] } else { s.joint.project(q) };
         }
-        Ok(a)
+        unused.fill([0.0; 3]);
+        Ok(())
     }
 }
 
