@@ -53,7 +53,9 @@ impl<B: Board> Cycles for BoardCycles<'_, B> {
 
 /// Runs the loop until the session ends (emulated board) or forever.
 pub fn run<B: Board>(board: &mut B) -> Outcome {
-    let region = Region::<SEGMENTS>::parse_sized(board.tables());
+    // Parsed in place: the region is kilobytes, and every move a copy.
+    let mut region = Region::<SEGMENTS>::EMPTY;
+    region.parse_into(board.tables());
     drive(board, &region)
 }
 

@@ -159,47 +159,54 @@ impl<'a> Region<'a> {
 impl<'a, const N: usize> Region<'a, N> {
     /// [`Region::parse`] with a rig of capacity `N`: a valid rig with more
     /// segments is refused with [`StatusReason::RigTooLarge`].
-    ///
-    /// Never inlined: the decoding's temporaries live in this call's stack
-    /// frame, not in the caller's for the rest of its life.
     #[must_use]
-    #[inline(never)]
     pub fn parse_sized(bytes: &'a [u8]) -> Self {
-        let (rig, rest) = match Rig::parse_sized(bytes) {
-            Ok(parsed) => parsed,
-            Err(e) => {
-                return Self {
-                    rig: None,
-                    table: None,
-                    reason: match e {
-                        RigError::Capacity { .. } => StatusReason::RigTooLarge,
-                        _ => StatusReason::NoRig,
-                    },
-                };
+        let mut region = Self::EMPTY;
+        region.parse_into(bytes);
+        region
+    }
+
+    /// No rig and no table ([`StatusReason::NoRig`]): where
+    /// [`Region::parse_into`] starts.
+    pub const EMPTY: Self = Self {
+        rig: None,
+        table: None,
+        reason: StatusReason::NoRig,
+    };
+
+    /// [`Region::parse_sized`] in place, for a caller that keeps the region
+    /// where it is: the rig is kilobytes, and every move is a copy on the
+    /// stack. Never inlined: the decoding's temporaries stay in this call's
+    /// stack frame.
+    #[inline(never)]
+    pub fn parse_into(&mut self, bytes: &'a [u8]) {
+        self.table = None;
+        self.reason = StatusReason::NoRig;
+        let rest = match Rig::parse_into(bytes, &mut self.rig) {
+            Ok(rest) => rest,
+            Err(RigError::Capacity { .. }) => {
+                self.reason = StatusReason::RigTooLarge;
+                return;
             }
+            Err(_) => return,
+        };
+        let Some(rig) = &self.rig else {
+            return;
         };
         let pad = (4 - (bytes.len() - rest.len()) % 4) % 4;
         let table_bytes = rest.get(pad..).unwrap_or(&[]);
-        if table_bytes.len() < 4 {
-            return Self {
-                rig: Some(rig),
-                table: None,
-                reason: StatusReason::NoTable,
-            };
-        }
-        let (table, reason) = match Table::parse(table_bytes) {
-            Ok(t) => match check_table(&rig, &t) {
-                StatusReason::Ok => (Some(t), StatusReason::Ok),
-                why => (None, why),
-            },
-            Err(TableError::BadMagic) if erased(table_bytes) => (None, StatusReason::NoTable),
-            Err(e) => (None, table_reason(e)),
+        (self.table, self.reason) = if table_bytes.len() < 4 {
+            (None, StatusReason::NoTable)
+        } else {
+            match Table::parse(table_bytes) {
+                Ok(t) => match check_table(rig, &t) {
+                    StatusReason::Ok => (Some(t), StatusReason::Ok),
+                    why => (None, why),
+                },
+                Err(TableError::BadMagic) if erased(table_bytes) => (None, StatusReason::NoTable),
+                Err(e) => (None, table_reason(e)),
+            }
         };
-        Self {
-            rig: Some(rig),
-            table,
-            reason,
-        }
     }
 }
 

@@ -423,15 +423,45 @@ impl<'a, const N: usize> Rig<'a, N> {
     /// [`Rig::parse`] into a rig of capacity `N`: a valid rig with more than
     /// `N` segments is refused with [`RigError::Capacity`].
     pub fn parse_sized(bytes: &'a [u8]) -> Result<(Self, &'a [u8]), RigError> {
-        let (desc, rest) = RigDesc::<N>::from_blob_sized(bytes)?;
-        Ok((Self::from_desc_sized(&desc)?, rest))
+        let mut slot = None;
+        let rest = Self::parse_into(bytes, &mut slot)?;
+        slot.map(|rig| (rig, rest)).ok_or(RigError::Truncated)
+    }
+
+    /// [`Rig::parse_sized`] into `slot` (set to the rig on success, `None`
+    /// on an error), for a caller that keeps the rig in place: a rig is
+    /// kilobytes, and every move is a copy on the stack. Returns the bytes
+    /// after the blob. Never inlined: the decoded description stays in this
+    /// call's stack frame.
+    #[inline(never)]
+    pub fn parse_into(bytes: &'a [u8], slot: &mut Option<Self>) -> Result<&'a [u8], RigError> {
+        *slot = None;
+        // Borrowed where it was returned: no copy of the description.
+        let parsed = RigDesc::<N>::from_blob_sized(bytes);
+        let (desc, rest) = match &parsed {
+            Ok((desc, rest)) => (desc, *rest),
+            Err(e) => return Err(*e),
+        };
+        Self::from_desc_into(desc, slot)?;
+        Ok(rest)
     }
 
     /// [`Rig::from_desc`] into a rig of capacity `N`: a valid rig with more
-    /// than `N` segments is refused with [`RigError::Capacity`]. Never
-    /// inlined: its temporaries stay in this call's stack frame.
-    #[inline(never)]
+    /// than `N` segments is refused with [`RigError::Capacity`].
     pub fn from_desc_sized<const M: usize>(desc: &RigDesc<'a, M>) -> Result<Self, RigError> {
+        let mut slot = None;
+        Self::from_desc_into(desc, &mut slot)?;
+        slot.ok_or(RigError::Truncated)
+    }
+
+    /// [`Rig::from_desc_sized`] into `slot` (see [`Rig::parse_into`]).
+    /// Never inlined: its temporaries stay in this call's stack frame.
+    #[inline(never)]
+    pub fn from_desc_into<const M: usize>(
+        desc: &RigDesc<'a, M>,
+        slot: &mut Option<Self>,
+    ) -> Result<(), RigError> {
+        *slot = None;
         desc.validate()?;
         if desc.segments.len() > N {
             return Err(RigError::Capacity {
@@ -439,7 +469,7 @@ impl<'a, const N: usize> Rig<'a, N> {
                 capacity: u8::try_from(N).unwrap_or(u8::MAX),
             });
         }
-        let mut rig = Rig {
+        let rig = slot.insert(Rig {
             name: desc.name,
             frame_period_us: desc.frame_period_us,
             failsafe_timeout_ms: desc.failsafe_timeout_ms,
@@ -455,7 +485,7 @@ impl<'a, const N: usize> Rig<'a, N> {
             params: desc.params,
             goals: desc.goals,
             hash: desc.rig_hash(),
-        };
+        });
         for (((seg, parent), offset), d) in rig
             .segments
             .iter_mut()
@@ -473,8 +503,16 @@ impl<'a, const N: usize> Rig<'a, N> {
             *parent = d.parent;
             *offset = seg.origin;
         }
-        rig.rest = rig.compute_rest()?;
-        Ok(rig)
+        match rig.compute_rest() {
+            Ok(pose) => {
+                rig.rest = pose;
+                Ok(())
+            }
+            Err(e) => {
+                *slot = None;
+                Err(e)
+            }
+        }
     }
 
     fn compute_rest(&self) -> Result<Pose<N>, RigError> {
