@@ -59,7 +59,7 @@
 
 use crate::body::{Angles, Body};
 use crate::goal::GoalSet;
-use crate::grid::{Adjust, Grid};
+use crate::grid::{Adjust, Grid, Query};
 use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
 use crate::rig::{MAX_PARAMS, Rig, RigError};
 use crate::servo::{Slew, quarter_us};
@@ -258,19 +258,27 @@ struct Correction<const N: usize> {
 }
 
 impl<const N: usize> Correction<N> {
-    /// `solved − synth`.
-    fn between(synth: &Angles<N>, solved: &Angles<N>) -> Self {
-        let mut values = [[0.0; 3]; N];
-        for ((c, a), b) in values.iter_mut().zip(&solved.values).zip(&synth.values) {
+    /// No correction.
+    const ZERO: Self = Self {
+        values: [[0.0; 3]; N],
+        root_shift: glam::Vec3::ZERO,
+        root_turn: Quat::IDENTITY,
+    };
+
+    /// Sets the correction to `solved − synth` (in place: no copy of it).
+    fn set_between(&mut self, synth: &Angles<N>, solved: &Angles<N>) {
+        for ((c, a), b) in self
+            .values
+            .iter_mut()
+            .zip(&solved.values)
+            .zip(&synth.values)
+        {
             for ((c, a), b) in c.iter_mut().zip(a).zip(b) {
                 *c = a - b;
             }
         }
-        Self {
-            values,
-            root_shift: solved.root_position - synth.root_position,
-            root_turn: solved.root_rotation * synth.root_rotation.conjugate(),
-        }
+        self.root_shift = solved.root_position - synth.root_position;
+        self.root_turn = solved.root_rotation * synth.root_rotation.conjugate();
     }
 
     /// Adds the correction to `angles` on the joints the active goals hang
@@ -664,7 +672,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
 
     /// Keeps the frame's sensors, boresight-corrected, for mapping.
     fn remember(&mut self, frame: &ValidTrackerFrame) {
-        self.last_sensors = List::new();
+        self.last_sensors.clear();
         for s in frame.sensors() {
             let b = self
                 .boresight
@@ -711,9 +719,11 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         let Some(params) = self.params.get(..n) else {
             return false;
         };
-        let Ok(query) = grid.query(params) else {
+        // Filled in place: a query is a few hundred bytes.
+        let mut query = Query::default();
+        if grid.query_into(params, &mut query).is_err() {
             return false;
-        };
+        }
         if query.adjust() != Adjust::None {
             self.adjusted = self.adjusted.saturating_add(1);
         }
@@ -746,7 +756,9 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
                 for (r, x) in self.residuals.iter_mut().zip(report.residuals.iter()) {
                     *r = *x;
                 }
-                self.warm = Some(Correction::between(&synth, &self.angles));
+                self.warm
+                    .get_or_insert(Correction::ZERO)
+                    .set_between(&synth, &self.angles);
                 true
             }
             Err(_) => {
