@@ -251,13 +251,19 @@ impl Joint {
     /// (unused entries are ignored): `R_a(θ₀)·R_b(θ₁)·R_c(θ₂)`.
     #[must_use]
     pub fn rotation(&self, values: &[f32; 3]) -> Quat {
-        let mut dofs = self.dofs().iter().zip(values);
-        let Some((first, &v)) = dofs.next() else {
-            return Quat::IDENTITY;
-        };
-        dofs.fold(first.axis.rotation(v), |q, (d, &v)| {
-            d.axis.rotate_after(q, v)
-        })
+        // By count, not an iterator fold: the same products in the same
+        // order, without iterator calls at opt-level "s" (forward
+        // kinematics calls this for every joint).
+        let [a, b, c] = &self.dofs;
+        let [x, y, z] = *values;
+        match self.count {
+            1 => a.axis.rotation(x),
+            2 => b.axis.rotate_after(a.axis.rotation(x), y),
+            3 => c
+                .axis
+                .rotate_after(b.axis.rotate_after(a.axis.rotation(x), y), z),
+            _ => Quat::IDENTITY,
+        }
     }
 
     /// `values` clamped to the limits; unused entries set to 0.
