@@ -273,9 +273,8 @@ impl<const N: usize> Correction<N> {
             .zip(&solved.values)
             .zip(&synth.values)
         {
-            for ((c, a), b) in c.iter_mut().zip(a).zip(b) {
-                *c = a - b;
-            }
+            let ([a0, a1, a2], [b0, b1, b2]) = (*a, *b);
+            *c = [a0 - b0, a1 - b1, a2 - b2];
         }
         self.root_shift = solved.root_position - synth.root_position;
         self.root_turn = solved.root_rotation * synth.root_rotation.conjugate();

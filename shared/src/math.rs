@@ -136,7 +136,8 @@ pub(crate) fn rsqrt_normal(x: f32) -> f32 {
 #[inline]
 #[must_use]
 pub fn rsqrt(x: f32) -> f32 {
-    if (f32::MIN_POSITIVE..f32::INFINITY).contains(&x) {
+    // Comparisons rather than `Range::contains` (a call at opt-level "s").
+    if x >= f32::MIN_POSITIVE && x < f32::INFINITY {
         rsqrt_normal(x)
     } else {
         rsqrt_special(x)
@@ -575,11 +576,12 @@ const SLERP_F: [[f32; 6]; 4] = [
 fn weight_poly(s: f32) -> [f32; 6] {
     let s2 = s * s;
     let [f0, f1, f2, f3] = SLERP_F;
-    let mut c = [0.0; 6];
-    for ((((ci, a), b), d), e) in c.iter_mut().zip(f0).zip(f1).zip(f2).zip(f3) {
-        *ci = s * (a + s2 * (b + s2 * (d + s2 * e)));
-    }
-    c
+    // Coefficient by coefficient (no iterator calls at opt-level "s").
+    let c = |i: usize| -> f32 {
+        let at = |f: [f32; 6]| f.get(i).copied().unwrap_or(0.0);
+        s * (at(f0) + s2 * (at(f1) + s2 * (at(f2) + s2 * at(f3))))
+    };
+    [c(0), c(1), c(2), c(3), c(4), c(5)]
 }
 
 /// Evaluates a degree-5 polynomial in `x` given `x²`, `x⁴` (Estrin's scheme:

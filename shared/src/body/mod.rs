@@ -269,11 +269,15 @@ impl Joint {
     /// `values` clamped to the limits; unused entries set to 0.
     #[must_use]
     pub fn clamp(&self, values: &[f32; 3]) -> [f32; 3] {
-        let mut out = [0.0; 3];
-        for ((o, d), &v) in out.iter_mut().zip(self.dofs()).zip(values) {
-            *o = d.clamp(v);
+        // By count, as in `rotation` (no iterator calls at opt-level "s").
+        let [a, b, c] = &self.dofs;
+        let [x, y, z] = *values;
+        match self.count {
+            1 => [a.clamp(x), 0.0, 0.0],
+            2 => [a.clamp(x), b.clamp(y), 0.0],
+            3 => [a.clamp(x), b.clamp(y), c.clamp(z)],
+            _ => [0.0; 3],
         }
-        out
     }
 
     /// How far `values` lie outside the limits (largest excess, radians).
