@@ -35,7 +35,7 @@ use marionette_core::wire::{
 const CHUNK: usize = 64;
 
 /// The most segments of a rig this firmware drives: the capacity of its
-/// [`Region`] and [`Performer`]. Every shipped rig fits (`humanoid16`: 16,
+/// [`Region`] and [`Performer`]. Every shipped rig fits (`humanoid16`: 13,
 /// `cmu31`: 31).
 pub const SEGMENTS: usize = 32;
 

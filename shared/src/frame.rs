@@ -52,10 +52,19 @@
 //! [`Region`] and [`Performer`] hold the rig, poses, joint angles and the
 //! solver's state for at most `N` segments, a const parameter (default
 //! [`MAX_SEGMENTS`], the rig format's limit). A firmware picks the smallest
-//! that fits its rigs, `Region::<32>::parse_sized` and `Performer<'_, '_, 32>`
-//! (the shipped `humanoid16` and `cmu31` rigs fit): RAM and per-frame copies
-//! scale with it. A rig with more segments is refused as
-//! [`StatusReason::RigTooLarge`], like a missing rig.
+//! that fits its rigs, e.g. 32 for the shipped `humanoid16` (13 segments)
+//! and `cmu31` (31): RAM and per-frame copies scale with it. It parses its
+//! region in place (a rig is kilobytes, and every move of one is a copy on
+//! the stack) and runs the loop on it:
+//!
+//! ```text
+//! let mut region = Region::<32>::EMPTY;
+//! region.parse_into(flash_bytes);
+//! let mut performer = Performer::new(&region); // Option<Performer<'_, '_, 32>>
+//! ```
+//!
+//! A rig with more segments than `N` is refused as
+//! [`StatusReason::RigTooLarge`], like a missing rig: nothing is driven.
 
 use crate::body::{Angles, Body};
 use crate::goal::GoalSet;

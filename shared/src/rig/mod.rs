@@ -699,6 +699,36 @@ mod tests {
     }
 
     #[test]
+    fn a_rig_over_the_capacity_is_refused() {
+        let d = arm();
+        let mut buf = [0u8; 600];
+        let n = d.to_blob(&mut buf).unwrap();
+        let over = RigError::Capacity {
+            segments: 3,
+            capacity: 2,
+        };
+        assert_eq!(Rig::<'_, 2>::parse_sized(&buf[..n]).err(), Some(over));
+        assert_eq!(Rig::<'_, 2>::from_desc_sized(&d).err(), Some(over));
+        let mut slot = None;
+        assert_eq!(Rig::<'_, 2>::parse_into(&buf[..n], &mut slot), Err(over));
+        assert!(slot.is_none());
+        // At capacity it parses, and equals the full-capacity rig.
+        let (small, rest) = Rig::<'_, 3>::parse_sized(&buf[..n]).unwrap();
+        let (full, _) = Rig::parse(&buf[..n]).unwrap();
+        assert!(rest.is_empty());
+        assert_eq!(small.body().segments, full.body().segments);
+        assert_eq!(small.rest_pose().positions(), full.rest_pose().positions());
+        assert_eq!(small.rig_hash(), full.rig_hash());
+        // A damaged blob is a CRC error at any capacity.
+        let mut bad = buf;
+        bad[PREFIX_LEN + 2] ^= 1;
+        assert_eq!(
+            Rig::<'_, 2>::parse_sized(&bad[..n]).err(),
+            Some(RigError::Crc)
+        );
+    }
+
+    #[test]
     fn every_covered_byte_is_checked() {
         let d = arm();
         let mut buf = [0u8; 600];
