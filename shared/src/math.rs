@@ -137,6 +137,7 @@ pub(crate) fn rsqrt_normal(x: f32) -> f32 {
 #[must_use]
 pub fn rsqrt(x: f32) -> f32 {
     // Comparisons rather than `Range::contains` (a call at opt-level "s").
+    #[allow(clippy::manual_range_contains)]
     if x >= f32::MIN_POSITIVE && x < f32::INFINITY {
         rsqrt_normal(x)
     } else {
