@@ -259,70 +259,100 @@ fn table_reason(e: TableError) -> StatusReason {
 /// never drifts away from the synthesis on joints no goal pulls. The
 /// correction is dropped when a solve fails and when the loop disarms or
 /// times out.
+///
+/// One buffer serves both ends of a solve, so no copy of the joint state is
+/// made: [`Correction::start`] adds the correction to the synthesized angles
+/// and keeps the synthesized ones in its place; [`Correction::finish`] turns
+/// them into the new correction, `solved − synthesized`.
 #[derive(Clone, Copy, Debug)]
 struct Correction<const N: usize> {
+    /// Between frames: the correction per joint (while `held`); during a
+    /// solve: the synthesized angles.
     values: [[f32; 3]; N],
+    /// The root's shift, or during a solve its synthesized position.
     root_shift: glam::Vec3,
+    /// The root's turn, or during a solve its synthesized orientation.
     root_turn: Quat,
+    /// Whether a correction is held (false: none yet, or dropped).
+    held: bool,
 }
 
 impl<const N: usize> Correction<N> {
     /// No correction.
-    const ZERO: Self = Self {
+    const NONE: Self = Self {
         values: [[0.0; 3]; N],
         root_shift: glam::Vec3::ZERO,
         root_turn: Quat::IDENTITY,
+        held: false,
     };
 
-    /// Sets the correction to `solved − synth` (in place: no copy of it).
-    fn set_between(&mut self, synth: &Angles<N>, solved: &Angles<N>) {
-        for ((c, a), b) in self
-            .values
-            .iter_mut()
-            .zip(&solved.values)
-            .zip(&synth.values)
-        {
-            let ([a0, a1, a2], [b0, b1, b2]) = (*a, *b);
-            *c = [a0 - b0, a1 - b1, a2 - b2];
-        }
-        self.root_shift = solved.root_position - synth.root_position;
-        self.root_turn = solved.root_rotation * synth.root_rotation.conjugate();
+    /// Drops the correction.
+    fn clear(&mut self) {
+        self.held = false;
     }
 
-    /// Adds the correction to `angles` on the joints the active goals hang
-    /// from, then clamps into the joint limits.
-    fn apply(&self, body: &Body<'_>, goals: &GoalSet<MAX_GOALS>, angles: &mut Angles<N>) {
+    /// Turns the synthesized `angles` into the solver's start: adds the
+    /// correction, if one is held, on the joints the active goals hang
+    /// from, then clamps into the joint limits. Keeps the synthesized
+    /// angles for [`Correction::finish`].
+    fn start(&mut self, body: &Body<'_>, goals: &GoalSet<MAX_GOALS>, angles: &mut Angles<N>) {
         let mut pulled = [false; N];
-        for g in goals.as_slice().iter().filter(|g| g.weight > 0.0) {
-            let mut s = usize::from(g.segment);
-            while let Some(mark) = pulled.get_mut(s) {
-                if *mark {
-                    break;
-                }
-                *mark = true;
-                match body.parents.get(s) {
-                    Some(&p) if p != pose::NO_PARENT => s = usize::from(p),
-                    _ => break,
+        if self.held {
+            for g in goals.as_slice().iter().filter(|g| g.weight > 0.0) {
+                let mut s = usize::from(g.segment);
+                while let Some(mark) = pulled.get_mut(s) {
+                    if *mark {
+                        break;
+                    }
+                    *mark = true;
+                    match body.parents.get(s) {
+                        Some(&p) if p != pose::NO_PARENT => s = usize::from(p),
+                        _ => break,
+                    }
                 }
             }
         }
-        if !pulled.contains(&true) {
+        let any = pulled.contains(&true);
+        let n = angles.count.min(N);
+        let (Some(values), Some(kept)) = (angles.values.get_mut(..n), self.values.get_mut(..n))
+        else {
             return;
-        }
-        for ((v, c), _) in angles
-            .values
-            .iter_mut()
-            .zip(&self.values)
-            .zip(&pulled)
-            .filter(|(_, p)| **p)
-        {
-            for (v, c) in v.iter_mut().zip(c) {
-                *v += c;
+        };
+        for ((v, c), &p) in values.iter_mut().zip(kept).zip(&pulled) {
+            let synth = *v;
+            if p {
+                let ([v0, v1, v2], [c0, c1, c2]) = (synth, *c);
+                *v = [v0 + c0, v1 + c1, v2 + c2];
             }
+            *c = synth;
         }
-        angles.root_position += self.root_shift;
-        angles.root_rotation = crate::math::normalize_quat(self.root_turn * angles.root_rotation);
-        angles.clamp_to_limits(body);
+        let (position, rotation) = (angles.root_position, angles.root_rotation);
+        if any {
+            angles.root_position += self.root_shift;
+            angles.root_rotation = crate::math::normalize_quat(self.root_turn * rotation);
+        }
+        self.root_shift = position;
+        self.root_turn = rotation;
+        if any {
+            angles.clamp_to_limits(body);
+        }
+    }
+
+    /// After a successful solve from [`Correction::start`]: holds
+    /// `solved − synthesized` as the next frame's correction.
+    fn finish(&mut self, solved: &Angles<N>) {
+        let n = solved.count.min(N);
+        let (Some(values), Some(synth)) = (solved.values.get(..n), self.values.get_mut(..n)) else {
+            self.held = false;
+            return;
+        };
+        for (c, a) in synth.iter_mut().zip(values) {
+            let ([a0, a1, a2], [b0, b1, b2]) = (*a, *c);
+            *c = [a0 - b0, a1 - b1, a2 - b2];
+        }
+        self.root_shift = solved.root_position - self.root_shift;
+        self.root_turn = solved.root_rotation * self.root_turn.conjugate();
+        self.held = true;
     }
 }
 
@@ -344,7 +374,7 @@ pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
     last_sensors: List<Sensor, MAX_SENSORS>,
     goals: GoalSet<MAX_GOALS>,
     angles: Angles<N>,
-    warm: Option<Correction<N>>,
+    warm: Correction<N>,
     synth: Pose<N>,
     pose: Pose<N>,
     local: LocalPose<N>,
@@ -407,7 +437,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             last_sensors: List::new(),
             goals: GoalSet::new(),
             angles,
-            warm: None,
+            warm: Correction::NONE,
             synth: Pose::default(),
             pose: *rig.rest_pose(),
             local: LocalPose::default(),
@@ -548,7 +578,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         let timeout_us = self.rig.failsafe_timeout_ms().saturating_mul(1000);
         let lost = self.armed && now_us.wrapping_sub(self.last_frame_us) >= timeout_us;
         if lost || !self.armed {
-            self.warm = None;
+            self.warm.clear();
         }
         if (lost || !self.armed) && !self.resting {
             let moved = self.ease_to_rest();
@@ -565,7 +595,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
 
     fn disarm(&mut self) {
         self.armed = false;
-        self.warm = None;
+        self.warm.clear();
         self.disarms = self.disarms.wrapping_add(1);
     }
 
@@ -749,10 +779,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     /// failed.
     fn solve(&mut self) -> bool {
         let body: Body<'_> = self.rig.body();
-        let synth = self.angles;
-        if let Some(c) = &self.warm {
-            c.apply(&body, &self.goals, &mut self.angles);
-        }
+        self.warm.start(&body, &self.goals, &mut self.angles);
         match solve::solve(
             &SOLVER,
             &body,
@@ -764,13 +791,11 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
                 for (r, x) in self.residuals.iter_mut().zip(report.residuals.iter()) {
                     *r = *x;
                 }
-                self.warm
-                    .get_or_insert(Correction::ZERO)
-                    .set_between(&synth, &self.angles);
+                self.warm.finish(&self.angles);
                 true
             }
             Err(_) => {
-                self.warm = None;
+                self.warm.clear();
                 false
             }
         }
