@@ -379,6 +379,8 @@ pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
     pose: Pose<N>,
     local: LocalPose<N>,
     slews: [Option<Slew>; MAX_SERVOS],
+    /// The step length the slews' limits are set for, seconds.
+    step_dt: Option<f32>,
     targets: [u16; MAX_SERVOS],
     channels: usize,
     residuals: [f32; MAX_GOALS],
@@ -442,6 +444,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             pose: *rig.rest_pose(),
             local: LocalPose::default(),
             slews,
+            step_dt: None,
             targets,
             channels,
             residuals: [0.0; MAX_GOALS],
@@ -803,6 +806,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
 
     /// Joint angles → pulses → slew-limited targets.
     fn drive(&mut self, dt: f32) {
+        self.set_step(dt);
         for servo in self.rig.servos() {
             let ch = usize::from(servo.channel);
             let (Some(Some(slew)), Some(t)) = (self.slews.get_mut(ch), self.targets.get_mut(ch))
@@ -811,15 +815,30 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             };
             let angle = Rig::servo_angle(servo, &self.angles).unwrap_or(f32::NAN);
             let target = quarter_us(servo.calibration().pulse_us(angle));
-            slew.set_limits(servo.step_limits(dt));
             *t = slew.update(target);
         }
+    }
+
+    /// Sets every servo's slew limits for steps of `dt` seconds, unless they
+    /// already are: at a steady tracker rate `dt` is the same frame after
+    /// frame, and the limits with it.
+    fn set_step(&mut self, dt: f32) {
+        if self.step_dt.map(f32::to_bits) == Some(dt.to_bits()) {
+            return;
+        }
+        for servo in self.rig.servos() {
+            if let Some(Some(slew)) = self.slews.get_mut(usize::from(servo.channel)) {
+                slew.set_limits(servo.step_limits(dt));
+            }
+        }
+        self.step_dt = Some(dt);
     }
 
     /// One rest-ward step of every servo at the frame period. True if any
     /// target moved.
     fn ease_to_rest(&mut self) -> bool {
         let period = self.rig.frame_period_s();
+        self.set_step(period);
         let mut moved = false;
         let mut all_rest = true;
         for servo in self.rig.servos() {
@@ -829,7 +848,6 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
                 continue;
             };
             let rest = quarter_us(servo.rest_us);
-            slew.set_limits(servo.step_limits(period));
             let next = slew.update(rest);
             moved |= next != *t;
             all_rest &= next == rest && slew.last_step() == 0;
