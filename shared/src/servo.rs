@@ -73,20 +73,34 @@ impl Calibration {
         let u = if self.reversed { 1.0 - u } else { u };
         let pulse = self.pulse_min_us + u * (self.pulse_max_us - self.pulse_min_us) + self.trim_us;
         // max/min, not clamp: clamp asserts its bounds (a panic path).
-        pulse.max(self.pulse_low()).min(self.pulse_high())
+        min(max(pulse, self.pulse_low()), self.pulse_high())
     }
 
     /// The lowest pulse this channel may ever receive, µs.
     #[must_use]
     pub fn pulse_low(&self) -> f32 {
-        self.pulse_min_us.min(self.pulse_max_us)
+        min(self.pulse_min_us, self.pulse_max_us)
     }
 
     /// The highest pulse this channel may ever receive, µs.
     #[must_use]
     pub fn pulse_high(&self) -> f32 {
-        self.pulse_min_us.max(self.pulse_max_us)
+        max(self.pulse_min_us, self.pulse_max_us)
     }
+}
+
+/// `a.max(b)` by a comparison: the same for numbers and for a NaN `a` (the
+/// result is `b`), without `f32::max`'s library call on the Cortex-M4F
+/// (which has no `vmaxnm`).
+#[inline(always)]
+fn max(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// `a.min(b)` by a comparison (see [`max`]).
+#[inline(always)]
+fn min(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
 }
 
 /// Converts a pulse width in µs to the Maestro's quarter-microseconds, rounding
