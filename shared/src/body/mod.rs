@@ -307,7 +307,8 @@ impl Joint {
                 self.clamp(&[2.0 * math::atan2(a.axis.component(q.xyz()), q.w), 0.0, 0.0])
             }
             [a, b, _] if self.count == 2 => {
-                self.best_euler(euler(q, a.axis, b.axis, a.axis.third(b.axis)))
+                // The third angle is dropped: not computed.
+                self.best_euler(euler_in(q, [a.axis, b.axis, a.axis.third(b.axis)], false))
             }
             [a, b, c] if self.count == 3 => self.best_euler(euler(q, a.axis, b.axis, c.axis)),
             _ => [0.0; 3],
@@ -354,6 +355,13 @@ pub fn wrap_angle(a: f32) -> f32 {
 /// the one with `|β| <= π/2` first, then `(α+π, π−β, γ+π)`, all wrapped to (−π, π].
 #[must_use]
 pub fn euler(q: Quat, i: Axis, j: Axis, k: Axis) -> ([f32; 3], [f32; 3]) {
+    euler_in(q, [i, j, k], true)
+}
+
+/// [`euler`]; without `gamma`, the third angle is left 0 in the first
+/// solution and π in the second (for a 2-DOF joint, which drops it).
+#[inline(always)]
+fn euler_in(q: Quat, [i, j, k]: [Axis; 3], gamma: bool) -> ([f32; 3], [f32; 3]) {
     let m = Mat3::from_quat(q);
     let even = matches!(
         (i, j),
@@ -368,7 +376,11 @@ pub fn euler(q: Quat, i: Axis, j: Axis, k: Axis) -> ([f32; 3], [f32; 3]) {
     } else {
         (
             math::atan2(-s * element(&m, j, k), element(&m, k, k)),
-            math::atan2(-s * element(&m, i, j), element(&m, i, i)),
+            if gamma {
+                math::atan2(-s * element(&m, i, j), element(&m, i, i))
+            } else {
+                0.0
+            },
         )
     };
     let first = [alpha, beta, gamma];
