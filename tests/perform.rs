@@ -242,6 +242,10 @@ fn a_rig_over_the_capacity_is_refused_as_too_large() {
     let mut fits = Region::<16>::EMPTY;
     fits.parse_into(&region);
     assert_eq!(fits.reason, StatusReason::Ok);
-    let performer = Performer::new(&fits).expect("humanoid16 fits 16 segments");
-    assert_eq!(performer.pose().len(), 13, "humanoid16: 13 segments, 16 DOFs");
+    let performer = Performer::new(&fits).expect("humanoid16 (13 segments) fits 16");
+    assert_eq!(
+        performer.pose().len(),
+        13,
+        "humanoid16: 13 segments, 16 DOFs"
+    );
 }
