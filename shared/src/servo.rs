@@ -235,7 +235,7 @@ impl Slew {
         let dist = target - here;
         // The fastest speed from which we can still stop within `dist`:
         // v² ≤ 2·a·d, in whole units per frame.
-        let brake = stopping_speed(dist.unsigned_abs(), amax);
+        let brake = capped_stopping_speed(dist.unsigned_abs(), amax, vmax);
         let wanted = dist.signum() * dist.abs().min(brake).min(vmax);
         let step = wanted
             .max(self.step - amax)
@@ -274,6 +274,19 @@ fn stopping_speed(dist: u32, accel: i32) -> i32 {
         v += 1;
     }
     v.min(i32::MAX as u32) as i32
+}
+
+/// `stopping_speed(dist, accel).min(vmax)` (`vmax ≥ 0`). When even the top
+/// speed stops in time the brake does not bind, and the exact stopping
+/// speed (at least `vmax` then: the braking distance grows with the speed)
+/// is not needed.
+fn capped_stopping_speed(dist: u32, accel: i32, vmax: i32) -> i32 {
+    let a = accel.max(1).unsigned_abs();
+    if braking_distance(vmax.unsigned_abs(), a) <= u64::from(dist) {
+        vmax
+    } else {
+        stopping_speed(dist, accel).min(vmax)
+    }
 }
 
 /// Distance covered by the steps v, v−a, v−2a, … while they are positive.
@@ -336,6 +349,17 @@ mod tests {
                     braking_distance(v as u32 + 1, a) > u64::from(dist),
                     "{dist} {accel}"
                 );
+            }
+        }
+        for accel in [1, 3, 40, 65_535] {
+            for vmax in [0, 1, 2, 7, 100, 65_535] {
+                for dist in (0..2000).chain([65_535, 1 << 20]) {
+                    assert_eq!(
+                        capped_stopping_speed(dist, accel, vmax),
+                        stopping_speed(dist, accel).min(vmax),
+                        "{dist} {accel} {vmax}"
+                    );
+                }
             }
         }
         // The distance of v, v - a, ... summed directly.
