@@ -643,7 +643,12 @@ impl<const N: usize> Angles<N> {
 
     /// Clamps every angle into its joint's limits (unused entries become 0).
     pub fn clamp_to_limits(&mut self, body: &Body<'_>) {
-        for (v, s) in self.values.iter_mut().zip(body.segments).skip(1) {
+        // Sliced past the root rather than `skip(1)` (a call at opt-level "s").
+        let (Some(values), Some(segments)) = (self.values.get_mut(1..), body.segments.get(1..))
+        else {
+            return;
+        };
+        for (v, s) in values.iter_mut().zip(segments) {
             *v = s.joint.clamp(v);
         }
     }
