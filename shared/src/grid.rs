@@ -1081,7 +1081,12 @@ impl Trilinear {
         let ([u0, u1, ..], [v0, v1, ..], [w0, w1, ..]) = (x.weight, y.weight, z.weight);
         // The same sums and products, in the same order, as `Window::of`.
         let at = |a: u32, b: u32, c: u32| a.wrapping_add(b).wrapping_add(c);
-        let slerp = [x.t, y.t, z.t].map(SlerpWeight::new);
+        // Written out, not `[..].map(..)` (an out-of-line loop at opt-level "s").
+        let slerp = [
+            SlerpWeight::new(x.t),
+            SlerpWeight::new(y.t),
+            SlerpWeight::new(z.t),
+        ];
         Self {
             index: [
                 at(x0, y0, z0),
