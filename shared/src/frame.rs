@@ -687,14 +687,15 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         self.stages[stage::SERVO] = t4.wrapping_sub(t3);
         self.stages[stage::TOTAL] = t4.wrapping_sub(start);
         self.frames_out = self.frames_out.wrapping_add(1);
-        let reply = self
-            .frames_out
-            .is_multiple_of(TELEMETRY_EVERY)
-            .then(|| self.telemetry(frame.seq()));
-        Update {
+        // The reply set in place: an update is hundreds of bytes.
+        let mut update = Update {
             outputs: Some(Cause::Frame(frame.seq())),
-            reply,
+            reply: None,
+        };
+        if self.frames_out.is_multiple_of(TELEMETRY_EVERY) {
+            update.reply = Some(self.telemetry(frame.seq()));
         }
+        update
     }
 
     /// The step length for a frame at tracker time `time_us`, seconds.
