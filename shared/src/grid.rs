@@ -1287,13 +1287,18 @@ impl Trilinear {
     ) -> Result<(Vec3, [[f32; 4]; 8]), GridError> {
         let mut q = [[0.0; 4]; 8];
         let mut p = Vec3::ZERO;
-        let window = self.index.iter().zip(&self.weight).zip(&mut q);
-        for (j, ((&index, &w), slot)) in window.enumerate() {
+        // A counted loop rather than zipped iterators: at opt-level "s" the
+        // loop is not unrolled, and the iterators cost more than the reads.
+        let mut j = 0;
+        while let (Some(&index), Some(&w), Some(slot)) =
+            (self.index.get(j), self.weight.get(j), q.get_mut(j))
+        {
             let (sp, sq) = samples
                 .sample(index as usize, segment)
                 .ok_or(GridError::MissingSample)?;
             p = if j == 0 { sp * w } else { p + sp * w };
             *slot = [sq.x, sq.y, sq.z, sq.w];
+            j += 1;
         }
         Ok((p, q))
     }
