@@ -622,3 +622,25 @@ fn a_rig_for_a_servo_back_end_the_board_lacks_is_refused() {
     let why = refused(&perform::region(&buf[..n], Some(&table)));
     assert_eq!(why, StatusReason::Unsupported);
 }
+
+/// The firmware holds rigs of at most 32 segments (its RAM budget): a valid
+/// rig with more is refused at boot with its own reason, like a missing rig.
+#[test]
+fn a_rig_over_the_firmware_capacity_is_refused() {
+    let rig16 = humanoid16();
+    let mut desc = rig16.desc();
+    // Rigid segments hanging from the root, named n00, n01, ...: 40 in all.
+    let names: Vec<String> = (0..40).map(|i| format!("n{i:02}")).collect();
+    let mut extra = desc.segments.as_slice()[0];
+    extra.parent = 0;
+    extra.dofs = marionette_core::wire::List::new();
+    for name in &names[desc.segments.len()..] {
+        extra.name = name;
+        desc.segments.push(extra).unwrap();
+    }
+    assert_eq!(desc.segments.len(), 40);
+    let mut buf = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
+    let n = desc.to_blob(&mut buf).unwrap();
+    let why = refused(&perform::region(&buf[..n], None));
+    assert_eq!(why, StatusReason::RigTooLarge);
+}

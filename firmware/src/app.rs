@@ -13,6 +13,10 @@
 //! A rig whose servo back-end the board cannot drive ([`Board::supports`])
 //! never arms: its `Status` reason is `Unsupported`.
 //!
+//! The loop holds rigs of at most [`SEGMENTS`] segments (its RAM scales with
+//! it); a valid rig with more is reported as `RigTooLarge` and, like a
+//! missing rig, drives nothing.
+//!
 //! Without a valid rig in the table region there is nothing to drive: the
 //! app answers `Hello` and `RequestStatus` with a `Status` whose reason is
 //! `NoRig`, refuses every other command, and never writes the servo bus.
@@ -30,6 +34,14 @@ use marionette_core::wire::{
 /// Bytes read from the tracker link per pass.
 const CHUNK: usize = 64;
 
+/// The most segments of a rig this firmware drives: the capacity of its
+/// [`Region`] and [`Performer`]. Every shipped rig fits (`humanoid16`: 13,
+/// `cmu31`: 31).
+pub const SEGMENTS: usize = 32;
+
+/// The live loop at the firmware's capacity.
+pub type BoardPerformer<'r, 'a> = Performer<'r, 'a, SEGMENTS>;
+
 /// The board's cycle counter, seen by the core.
 struct BoardCycles<'b, B: Board>(&'b mut B);
 
@@ -41,15 +53,26 @@ impl<B: Board> Cycles for BoardCycles<'_, B> {
 
 /// Runs the loop until the session ends (emulated board) or forever.
 pub fn run<B: Board>(board: &mut B) -> Outcome {
-    let region = Region::parse(board.tables());
-    match Performer::new(&region) {
-        Some(mut performer) => {
+    // Parsed in place: the region is kilobytes, and every move a copy.
+    let mut region = Region::<SEGMENTS>::EMPTY;
+    region.parse_into(board.tables());
+    drive(board, &region)
+}
+
+/// Drives the region's rig, or idles without one. Not inlined into [`run`],
+/// so that the performer's stack frame is not below the region parse's.
+#[inline(never)]
+fn drive<B: Board>(board: &mut B, region: &Region<'_, SEGMENTS>) -> Outcome {
+    // Used in place: the performer is too big to move around on the stack.
+    let mut performer = Performer::new(region);
+    match performer.as_mut() {
+        Some(performer) => {
             if let Some(rig) = &region.rig
                 && !board.supports(&rig.output())
             {
                 performer.refuse(StatusReason::Unsupported);
             }
-            perform(board, &mut performer)
+            perform(board, performer)
         }
         None => idle(board, region.reason),
     }
@@ -65,7 +88,7 @@ fn read_ready<B: Board>(board: &mut B, buf: &mut [u8; CHUNK]) -> Result<usize, O
     }
 }
 
-fn perform<B: Board>(board: &mut B, performer: &mut Performer<'_, '_>) -> Outcome {
+fn perform<B: Board>(board: &mut B, performer: &mut BoardPerformer<'_, '_>) -> Outcome {
     let period = performer.frame_period_us().max(1);
     let mut last_tick = board.now_us();
     let mut buf = [0u8; CHUNK];
@@ -100,7 +123,7 @@ fn perform<B: Board>(board: &mut B, performer: &mut Performer<'_, '_>) -> Outcom
 /// Sends an update's servo targets and reply.
 fn emit<B: Board>(
     board: &mut B,
-    performer: &Performer<'_, '_>,
+    performer: &BoardPerformer<'_, '_>,
     update: Update,
 ) -> Result<(), Outcome> {
     let (tracker, servo) = board.links();

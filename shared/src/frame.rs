@@ -46,12 +46,31 @@
 //! fail-safe timeout, every servo eases to its rest pulse within its slew
 //! limits. The same happens after `Disarm`. A board without a valid rig and
 //! table refuses to arm and reports why in its [`Status`].
+//!
+//! ## Capacity
+//!
+//! [`Region`] and [`Performer`] hold the rig, poses, joint angles and the
+//! solver's state for at most `N` segments, a const parameter (default
+//! [`MAX_SEGMENTS`], the rig format's limit). A firmware picks the smallest
+//! that fits its rigs, e.g. 32 for the shipped `humanoid16` (13 segments)
+//! and `cmu31` (31): RAM and per-frame copies scale with it. It parses its
+//! region in place (a rig is kilobytes, and every move of one is a copy on
+//! the stack) and runs the loop on it:
+//!
+//! ```text
+//! let mut region = Region::<32>::EMPTY;
+//! region.parse_into(flash_bytes);
+//! let mut performer = Performer::new(&region); // Option<Performer<'_, '_, 32>>
+//! ```
+//!
+//! A rig with more segments than `N` is refused as
+//! [`StatusReason::RigTooLarge`], like a missing rig: nothing is driven.
 
 use crate::body::{Angles, Body};
 use crate::goal::GoalSet;
-use crate::grid::{Adjust, Grid};
+use crate::grid::{Adjust, Grid, Query};
 use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
-use crate::rig::{MAX_PARAMS, Rig};
+use crate::rig::{MAX_PARAMS, Rig, RigError};
 use crate::servo::{Slew, quarter_us};
 use crate::solve::{self, Solver};
 use crate::table::{Kind, Table, TableError};
@@ -61,6 +80,11 @@ use crate::wire::{
     ValidTrackerFrame,
 };
 use glam::Quat;
+
+/// The live loop's solver. A constant, so that a firmware links only the
+/// method it runs ([`Solver::DEFAULT`]'s whole-tree DLS), not the balancing
+/// solvers the host compares it with.
+const SOLVER: Solver = Solver::DEFAULT;
 
 /// A telemetry message goes out after every this many output frames.
 pub const TELEMETRY_EVERY: u32 = 10;
@@ -118,11 +142,12 @@ impl Cycles for NoCycles {
 }
 
 /// The validated contents of the table region: the rig blob, then the table
-/// blob at the next 4-byte boundary.
+/// blob at the next 4-byte boundary. The rig has capacity `N` (see
+/// [Capacity](self#capacity)).
 #[derive(Clone, Debug)]
-pub struct Region<'a> {
-    /// The rig, if its blob is valid.
-    pub rig: Option<Rig<'a>>,
+pub struct Region<'a, const N: usize = MAX_SEGMENTS> {
+    /// The rig, if its blob is valid (and fits the capacity).
+    pub rig: Option<Rig<'a, N>>,
     /// The table, if its blob is valid and matches the rig.
     pub table: Option<Table<'a>>,
     /// Why the board cannot arm ([`StatusReason::Ok`] if it can).
@@ -131,43 +156,71 @@ pub struct Region<'a> {
 
 impl<'a> Region<'a> {
     /// Validates a table region (magic, version, CRC and bounds of both
-    /// blobs, and that the table was built for this rig).
+    /// blobs, and that the table was built for this rig), at the rig
+    /// format's capacity; [`Region::parse_sized`] reads it into a smaller
+    /// rig.
     #[must_use]
     pub fn parse(bytes: &'a [u8]) -> Self {
-        let Ok((rig, rest)) = Rig::parse(bytes) else {
-            return Self {
-                rig: None,
-                table: None,
-                reason: StatusReason::NoRig,
-            };
+        Self::parse_sized(bytes)
+    }
+}
+
+impl<'a, const N: usize> Region<'a, N> {
+    /// [`Region::parse`] with a rig of capacity `N`: a valid rig with more
+    /// segments is refused with [`StatusReason::RigTooLarge`].
+    #[must_use]
+    pub fn parse_sized(bytes: &'a [u8]) -> Self {
+        let mut region = Self::EMPTY;
+        region.parse_into(bytes);
+        region
+    }
+
+    /// No rig and no table ([`StatusReason::NoRig`]): where
+    /// [`Region::parse_into`] starts.
+    pub const EMPTY: Self = Self {
+        rig: None,
+        table: None,
+        reason: StatusReason::NoRig,
+    };
+
+    /// [`Region::parse_sized`] in place, for a caller that keeps the region
+    /// where it is: the rig is kilobytes, and every move is a copy on the
+    /// stack. Never inlined: the decoding's temporaries stay in this call's
+    /// stack frame.
+    #[inline(never)]
+    pub fn parse_into(&mut self, bytes: &'a [u8]) {
+        self.table = None;
+        self.reason = StatusReason::NoRig;
+        let rest = match Rig::parse_into(bytes, &mut self.rig) {
+            Ok(rest) => rest,
+            Err(RigError::Capacity { .. }) => {
+                self.reason = StatusReason::RigTooLarge;
+                return;
+            }
+            Err(_) => return,
+        };
+        let Some(rig) = &self.rig else {
+            return;
         };
         let pad = (4 - (bytes.len() - rest.len()) % 4) % 4;
         let table_bytes = rest.get(pad..).unwrap_or(&[]);
-        if table_bytes.len() < 4 {
-            return Self {
-                rig: Some(rig),
-                table: None,
-                reason: StatusReason::NoTable,
-            };
-        }
-        let (table, reason) = match Table::parse(table_bytes) {
-            Ok(t) => match check_table(&rig, &t) {
-                StatusReason::Ok => (Some(t), StatusReason::Ok),
-                why => (None, why),
-            },
-            Err(TableError::BadMagic) if erased(table_bytes) => (None, StatusReason::NoTable),
-            Err(e) => (None, table_reason(e)),
+        (self.table, self.reason) = if table_bytes.len() < 4 {
+            (None, StatusReason::NoTable)
+        } else {
+            match Table::parse(table_bytes) {
+                Ok(t) => match check_table(rig, &t) {
+                    StatusReason::Ok => (Some(t), StatusReason::Ok),
+                    why => (None, why),
+                },
+                Err(TableError::BadMagic) if erased(table_bytes) => (None, StatusReason::NoTable),
+                Err(e) => (None, table_reason(e)),
+            }
         };
-        Self {
-            rig: Some(rig),
-            table,
-            reason,
-        }
     }
 }
 
 /// Whether a valid table can drive this rig.
-fn check_table(rig: &Rig<'_>, table: &Table<'_>) -> StatusReason {
+fn check_table<const N: usize>(rig: &Rig<'_, N>, table: &Table<'_>) -> StatusReason {
     if table.rig_hash() != rig.rig_hash() || table.segment_count() != rig.body().len() {
         StatusReason::RigMismatch
     } else if table.kind() != Kind::Grid || table.axes().len() > MAX_PARAMS {
@@ -206,78 +259,109 @@ fn table_reason(e: TableError) -> StatusReason {
 /// never drifts away from the synthesis on joints no goal pulls. The
 /// correction is dropped when a solve fails and when the loop disarms or
 /// times out.
+///
+/// One buffer serves both ends of a solve, so no copy of the joint state is
+/// made: [`Correction::start`] adds the correction to the synthesized angles
+/// and keeps the synthesized ones in its place; [`Correction::finish`] turns
+/// them into the new correction, `solved − synthesized`.
 #[derive(Clone, Copy, Debug)]
-struct Correction {
-    values: [[f32; 3]; MAX_SEGMENTS],
+struct Correction<const N: usize> {
+    /// Between frames: the correction per joint (while `held`); during a
+    /// solve: the synthesized angles.
+    values: [[f32; 3]; N],
+    /// The root's shift, or during a solve its synthesized position.
     root_shift: glam::Vec3,
+    /// The root's turn, or during a solve its synthesized orientation.
     root_turn: Quat,
+    /// Whether a correction is held (false: none yet, or dropped).
+    held: bool,
 }
 
-impl Correction {
-    /// `solved − synth`.
-    fn between(synth: &Angles<MAX_SEGMENTS>, solved: &Angles<MAX_SEGMENTS>) -> Self {
-        let mut values = [[0.0; 3]; MAX_SEGMENTS];
-        for ((c, a), b) in values.iter_mut().zip(&solved.values).zip(&synth.values) {
-            for ((c, a), b) in c.iter_mut().zip(a).zip(b) {
-                *c = a - b;
-            }
-        }
-        Self {
-            values,
-            root_shift: solved.root_position - synth.root_position,
-            root_turn: solved.root_rotation * synth.root_rotation.conjugate(),
-        }
+impl<const N: usize> Correction<N> {
+    /// No correction.
+    const NONE: Self = Self {
+        values: [[0.0; 3]; N],
+        root_shift: glam::Vec3::ZERO,
+        root_turn: Quat::IDENTITY,
+        held: false,
+    };
+
+    /// Drops the correction.
+    fn clear(&mut self) {
+        self.held = false;
     }
 
-    /// Adds the correction to `angles` on the joints the active goals hang
-    /// from, then clamps into the joint limits.
-    fn apply(
-        &self,
-        body: &Body<'_>,
-        goals: &GoalSet<MAX_GOALS>,
-        angles: &mut Angles<MAX_SEGMENTS>,
-    ) {
-        let mut pulled = [false; MAX_SEGMENTS];
-        for g in goals.as_slice().iter().filter(|g| g.weight > 0.0) {
-            let mut s = usize::from(g.segment);
-            while let Some(mark) = pulled.get_mut(s) {
-                if *mark {
-                    break;
-                }
-                *mark = true;
-                match body.parents.get(s) {
-                    Some(&p) if p != pose::NO_PARENT => s = usize::from(p),
-                    _ => break,
+    /// Turns the synthesized `angles` into the solver's start: adds the
+    /// correction, if one is held, on the joints the active goals hang
+    /// from, then clamps into the joint limits. Keeps the synthesized
+    /// angles for [`Correction::finish`].
+    fn start(&mut self, body: &Body<'_>, goals: &GoalSet<MAX_GOALS>, angles: &mut Angles<N>) {
+        let mut pulled = [false; N];
+        if self.held {
+            for g in goals.as_slice().iter().filter(|g| g.weight > 0.0) {
+                let mut s = usize::from(g.segment);
+                while let Some(mark) = pulled.get_mut(s) {
+                    if *mark {
+                        break;
+                    }
+                    *mark = true;
+                    match body.parents.get(s) {
+                        Some(&p) if p != pose::NO_PARENT => s = usize::from(p),
+                        _ => break,
+                    }
                 }
             }
         }
-        if !pulled.contains(&true) {
+        let any = pulled.contains(&true);
+        let n = angles.count.min(N);
+        let (Some(values), Some(kept)) = (angles.values.get_mut(..n), self.values.get_mut(..n))
+        else {
             return;
-        }
-        for ((v, c), _) in angles
-            .values
-            .iter_mut()
-            .zip(&self.values)
-            .zip(&pulled)
-            .filter(|(_, p)| **p)
-        {
-            for (v, c) in v.iter_mut().zip(c) {
-                *v += c;
+        };
+        for ((v, c), &p) in values.iter_mut().zip(kept).zip(&pulled) {
+            let synth = *v;
+            if p {
+                let ([v0, v1, v2], [c0, c1, c2]) = (synth, *c);
+                *v = [v0 + c0, v1 + c1, v2 + c2];
             }
+            *c = synth;
         }
-        angles.root_position += self.root_shift;
-        angles.root_rotation = crate::math::normalize_quat(self.root_turn * angles.root_rotation);
-        angles.clamp_to_limits(body);
+        let (position, rotation) = (angles.root_position, angles.root_rotation);
+        if any {
+            angles.root_position += self.root_shift;
+            angles.root_rotation = crate::math::normalize_quat(self.root_turn * rotation);
+        }
+        self.root_shift = position;
+        self.root_turn = rotation;
+        if any {
+            angles.clamp_to_limits(body);
+        }
+    }
+
+    /// After a successful solve from [`Correction::start`]: holds
+    /// `solved − synthesized` as the next frame's correction.
+    fn finish(&mut self, solved: &Angles<N>) {
+        let n = solved.count.min(N);
+        let (Some(values), Some(synth)) = (solved.values.get(..n), self.values.get_mut(..n)) else {
+            self.held = false;
+            return;
+        };
+        for (c, a) in synth.iter_mut().zip(values) {
+            let ([a0, a1, a2], [b0, b1, b2]) = (*a, *c);
+            *c = [a0 - b0, a1 - b1, a2 - b2];
+        }
+        self.root_shift = solved.root_position - self.root_shift;
+        self.root_turn = solved.root_rotation * self.root_turn.conjugate();
+        self.held = true;
     }
 }
 
-/// The live loop of one rig (see the module doc).
-pub struct Performer<'r, 'a> {
-    rig: &'r Rig<'a>,
+/// The live loop of one rig, for at most `N` segments (see the module doc).
+pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
+    rig: &'r Rig<'a, N>,
     table: Option<&'r Table<'a>>,
     grid: Option<Grid<'a>>,
     reason: StatusReason,
-    solver: Solver,
     receiver: Receiver,
     armed: bool,
     resting: bool,
@@ -289,12 +373,14 @@ pub struct Performer<'r, 'a> {
     boresight: [Quat; MAX_SENSORS],
     last_sensors: List<Sensor, MAX_SENSORS>,
     goals: GoalSet<MAX_GOALS>,
-    angles: Angles<MAX_SEGMENTS>,
-    warm: Option<Correction>,
-    synth: Pose<MAX_SEGMENTS>,
-    pose: Pose<MAX_SEGMENTS>,
-    local: LocalPose<MAX_SEGMENTS>,
+    angles: Angles<N>,
+    warm: Correction<N>,
+    synth: Pose<N>,
+    pose: Pose<N>,
+    local: LocalPose<N>,
     slews: [Option<Slew>; MAX_SERVOS],
+    /// The step length the slews' limits are set for, seconds.
+    step_dt: Option<f32>,
     targets: [u16; MAX_SERVOS],
     channels: usize,
     residuals: [f32; MAX_GOALS],
@@ -305,11 +391,13 @@ pub struct Performer<'r, 'a> {
     disarms: u32,
 }
 
-impl<'r, 'a> Performer<'r, 'a> {
+impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     /// A loop for `region`'s rig (disarmed; servos assumed at rest). Returns
     /// `None` when the region holds no valid rig: there is nothing to drive.
+    /// Never inlined, like [`Region::parse_sized`].
     #[must_use]
-    pub fn new(region: &'r Region<'a>) -> Option<Self> {
+    #[inline(never)]
+    pub fn new(region: &'r Region<'a, N>) -> Option<Self> {
         let rig = region.rig.as_ref()?;
         let grid = region.table.as_ref().and_then(|t| t.grid().ok());
         let reason = match (region.reason, &grid) {
@@ -339,7 +427,6 @@ impl<'r, 'a> Performer<'r, 'a> {
             table: region.table.as_ref(),
             grid,
             reason,
-            solver: Solver::DEFAULT,
             receiver: Receiver::new(),
             armed: false,
             resting: true,
@@ -352,11 +439,12 @@ impl<'r, 'a> Performer<'r, 'a> {
             last_sensors: List::new(),
             goals: GoalSet::new(),
             angles,
-            warm: None,
+            warm: Correction::NONE,
             synth: Pose::default(),
             pose: *rig.rest_pose(),
             local: LocalPose::default(),
             slews,
+            step_dt: None,
             targets,
             channels,
             residuals: [0.0; MAX_GOALS],
@@ -423,7 +511,7 @@ impl<'r, 'a> Performer<'r, 'a> {
 
     /// The current world pose of the figure (solved, or rest).
     #[must_use]
-    pub fn pose(&self) -> &Pose<MAX_SEGMENTS> {
+    pub fn pose(&self) -> &Pose<N> {
         &self.pose
     }
 
@@ -493,7 +581,7 @@ impl<'r, 'a> Performer<'r, 'a> {
         let timeout_us = self.rig.failsafe_timeout_ms().saturating_mul(1000);
         let lost = self.armed && now_us.wrapping_sub(self.last_frame_us) >= timeout_us;
         if lost || !self.armed {
-            self.warm = None;
+            self.warm.clear();
         }
         if (lost || !self.armed) && !self.resting {
             let moved = self.ease_to_rest();
@@ -510,7 +598,7 @@ impl<'r, 'a> Performer<'r, 'a> {
 
     fn disarm(&mut self) {
         self.armed = false;
-        self.warm = None;
+        self.warm.clear();
         self.disarms = self.disarms.wrapping_add(1);
     }
 
@@ -599,14 +687,15 @@ impl<'r, 'a> Performer<'r, 'a> {
         self.stages[stage::SERVO] = t4.wrapping_sub(t3);
         self.stages[stage::TOTAL] = t4.wrapping_sub(start);
         self.frames_out = self.frames_out.wrapping_add(1);
-        let reply = self
-            .frames_out
-            .is_multiple_of(TELEMETRY_EVERY)
-            .then(|| self.telemetry(frame.seq()));
-        Update {
+        // The reply set in place: an update is hundreds of bytes.
+        let mut update = Update {
             outputs: Some(Cause::Frame(frame.seq())),
-            reply,
+            reply: None,
+        };
+        if self.frames_out.is_multiple_of(TELEMETRY_EVERY) {
+            update.reply = Some(self.telemetry(frame.seq()));
         }
+        update
     }
 
     /// The step length for a frame at tracker time `time_us`, seconds.
@@ -625,7 +714,7 @@ impl<'r, 'a> Performer<'r, 'a> {
 
     /// Keeps the frame's sensors, boresight-corrected, for mapping.
     fn remember(&mut self, frame: &ValidTrackerFrame) {
-        self.last_sensors = List::new();
+        self.last_sensors.clear();
         for s in frame.sensors() {
             let b = self
                 .boresight
@@ -672,9 +761,11 @@ impl<'r, 'a> Performer<'r, 'a> {
         let Some(params) = self.params.get(..n) else {
             return false;
         };
-        let Ok(query) = grid.query(params) else {
+        // Filled in place: a query is a few hundred bytes.
+        let mut query = Query::default();
+        if grid.query_into(params, &mut query).is_err() {
             return false;
-        };
+        }
         if query.adjust() != Adjust::None {
             self.adjusted = self.adjusted.saturating_add(1);
         }
@@ -685,25 +776,16 @@ impl<'r, 'a> Performer<'r, 'a> {
         if pose::to_local(&body.hierarchy(), &self.synth, &mut self.local).is_err() {
             return false;
         }
-        match Angles::from_local(&body, &self.local) {
-            Ok(a) => {
-                self.angles = a;
-                true
-            }
-            Err(_) => false,
-        }
+        self.angles.set_from_local(&body, &self.local).is_ok()
     }
 
     /// Solves the goals, warm-started (see [`Correction`]). False if it
     /// failed.
     fn solve(&mut self) -> bool {
         let body: Body<'_> = self.rig.body();
-        let synth = self.angles;
-        if let Some(c) = &self.warm {
-            c.apply(&body, &self.goals, &mut self.angles);
-        }
+        self.warm.start(&body, &self.goals, &mut self.angles);
         match solve::solve(
-            &self.solver,
+            &SOLVER,
             &body,
             &self.goals,
             &mut self.angles,
@@ -713,11 +795,11 @@ impl<'r, 'a> Performer<'r, 'a> {
                 for (r, x) in self.residuals.iter_mut().zip(report.residuals.iter()) {
                     *r = *x;
                 }
-                self.warm = Some(Correction::between(&synth, &self.angles));
+                self.warm.finish(&self.angles);
                 true
             }
             Err(_) => {
-                self.warm = None;
+                self.warm.clear();
                 false
             }
         }
@@ -725,6 +807,7 @@ impl<'r, 'a> Performer<'r, 'a> {
 
     /// Joint angles → pulses → slew-limited targets.
     fn drive(&mut self, dt: f32) {
+        self.set_step(dt);
         for servo in self.rig.servos() {
             let ch = usize::from(servo.channel);
             let (Some(Some(slew)), Some(t)) = (self.slews.get_mut(ch), self.targets.get_mut(ch))
@@ -733,15 +816,30 @@ impl<'r, 'a> Performer<'r, 'a> {
             };
             let angle = Rig::servo_angle(servo, &self.angles).unwrap_or(f32::NAN);
             let target = quarter_us(servo.calibration().pulse_us(angle));
-            slew.set_limits(servo.step_limits(dt));
             *t = slew.update(target);
         }
+    }
+
+    /// Sets every servo's slew limits for steps of `dt` seconds, unless they
+    /// already are: at a steady tracker rate `dt` is the same frame after
+    /// frame, and the limits with it.
+    fn set_step(&mut self, dt: f32) {
+        if self.step_dt.map(f32::to_bits) == Some(dt.to_bits()) {
+            return;
+        }
+        for servo in self.rig.servos() {
+            if let Some(Some(slew)) = self.slews.get_mut(usize::from(servo.channel)) {
+                slew.set_limits(servo.step_limits(dt));
+            }
+        }
+        self.step_dt = Some(dt);
     }
 
     /// One rest-ward step of every servo at the frame period. True if any
     /// target moved.
     fn ease_to_rest(&mut self) -> bool {
         let period = self.rig.frame_period_s();
+        self.set_step(period);
         let mut moved = false;
         let mut all_rest = true;
         for servo in self.rig.servos() {
@@ -751,7 +849,6 @@ impl<'r, 'a> Performer<'r, 'a> {
                 continue;
             };
             let rest = quarter_us(servo.rest_us);
-            slew.set_limits(servo.step_limits(period));
             let next = slew.update(rest);
             moved |= next != *t;
             all_rest &= next == rest && slew.last_step() == 0;

@@ -1081,7 +1081,12 @@ impl Trilinear {
         let ([u0, u1, ..], [v0, v1, ..], [w0, w1, ..]) = (x.weight, y.weight, z.weight);
         // The same sums and products, in the same order, as `Window::of`.
         let at = |a: u32, b: u32, c: u32| a.wrapping_add(b).wrapping_add(c);
-        let slerp = [x.t, y.t, z.t].map(SlerpWeight::new);
+        // Written out, not `[..].map(..)` (an out-of-line loop at opt-level "s").
+        let slerp = [
+            SlerpWeight::new(x.t),
+            SlerpWeight::new(y.t),
+            SlerpWeight::new(z.t),
+        ];
         Self {
             index: [
                 at(x0, y0, z0),
@@ -1282,13 +1287,18 @@ impl Trilinear {
     ) -> Result<(Vec3, [[f32; 4]; 8]), GridError> {
         let mut q = [[0.0; 4]; 8];
         let mut p = Vec3::ZERO;
-        let window = self.index.iter().zip(&self.weight).zip(&mut q);
-        for (j, ((&index, &w), slot)) in window.enumerate() {
+        // A counted loop rather than zipped iterators: at opt-level "s" the
+        // loop is not unrolled, and the iterators cost more than the reads.
+        let mut j = 0;
+        while let (Some(&index), Some(&w), Some(slot)) =
+            (self.index.get(j), self.weight.get(j), q.get_mut(j))
+        {
             let (sp, sq) = samples
                 .sample(index as usize, segment)
                 .ok_or(GridError::MissingSample)?;
             p = if j == 0 { sp * w } else { p + sp * w };
             *slot = [sq.x, sq.y, sq.z, sq.w];
+            j += 1;
         }
         Ok((p, q))
     }

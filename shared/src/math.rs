@@ -9,9 +9,8 @@
 //! are ~1,200 instructions per slerp on the Cortex-M4F). Everything here is
 //! built from IEEE-754 `+ - * /`, integer bit manipulation and comparisons only,
 //! evaluated in a fixed order (Rust never contracts `a * b + c` into an FMA), so
-//! every function returns the same bits on every target. The only `f64` use is
-//! the exact rounding check in [`sqrt`] (exact products, soft-float on the M4F,
-//! deterministic as well).
+//! every function returns the same bits on every target. The exact rounding
+//! check in [`sqrt`] is integer arithmetic on the significands.
 //!
 //! Quaternion dot products are written out component by component
 //! ([`quat_dot`]) rather than through `Quat::dot`: with SIMD enabled, glam sums
@@ -28,7 +27,7 @@
 //! |---|---|---|---|
 //! | [`abs`] | clear the sign bit | all | exact |
 //! | [`rsqrt`] | bit-trick seed (`0x5f37_5a86`) + 3 Newton steps, subnormals pre-scaled by 2^24 | `x > 0` | 1.9e-7 relative (≤ 2 ulp) |
-//! | [`sqrt`] | `x · rsqrt(x)` then an exact `f64` midpoint test picks the correctly rounded neighbour | `x ≥ 0` | correctly rounded (≤ 0.5 ulp), identical to the M4F `VSQRT` |
+//! | [`sqrt`] | `x · rsqrt(x)` then an exact integer midpoint test picks the correctly rounded neighbour | `x ≥ 0` | correctly rounded (≤ 0.5 ulp), identical to the M4F `VSQRT` |
 //! | [`sin`], [`cos`], [`sin_cos`] | Cody–Waite reduction by π/2 with a 3-part constant (8 + 8 + 24 bits), minimax odd/even polynomials on [−π/4, π/4] (degree 7 / 8, coefficients fitted for this crate) | accurate for `|x| ≤ 1e5` | 8.7e-8 absolute (≈ 1.5 ulp, worst near `r = ±π/4`) |
 //! | [`asin`], [`acos`] | minimax `x + x³P(x²)` (degree 13) on `|x| ≤ ½`; `asin x = π/2 − 2·asin √((1−x)/2)` above | `[−1, 1]` (clamped) | asin 1.6e-7, acos 3.1e-7 absolute (≈ 1.3 ulp) |
 //! | [`atan`], [`atan2`] | octant reduction, `atan t = π/4 + atan((t−1)/(t+1))` above tan(π/8), minimax degree 13 | all | atan 1.7e-7, atan2 2.9e-7 absolute (≈ 1.2 ulp of π) |
@@ -137,7 +136,9 @@ pub(crate) fn rsqrt_normal(x: f32) -> f32 {
 #[inline]
 #[must_use]
 pub fn rsqrt(x: f32) -> f32 {
-    if (f32::MIN_POSITIVE..f32::INFINITY).contains(&x) {
+    // Comparisons rather than `Range::contains` (a call at opt-level "s").
+    #[allow(clippy::manual_range_contains)]
+    if x >= f32::MIN_POSITIVE && x < f32::INFINITY {
         rsqrt_normal(x)
     } else {
         rsqrt_special(x)
@@ -177,30 +178,63 @@ pub fn sqrt(x: f32) -> f32 {
     round_sqrt(x, x * rsqrt_normal(x))
 }
 
-/// Picks the correctly rounded square root of `x` near the estimate `y`
-/// (within 2 ulp). The midpoints between neighbouring `f32`s have 25
-/// significant bits, so their squares are exact in `f64`, and no midpoint
-/// squares exactly to an `f32` (that would need an odd 25-bit integer whose
-/// square has at most 24 bits), so there are no ties.
+/// Picks the correctly rounded square root of normal positive `x` near the
+/// normal positive estimate `y` (within 2 ulp). The midpoints between
+/// neighbouring `f32`s have 25 significant bits, so their squares are exact
+/// 50-bit integers times a power of two ([`midpoint_square_cmp`]), and no
+/// midpoint squares exactly to an `f32` (that would need an odd 25-bit
+/// integer whose square has at most 24 bits), so there are no ties.
 fn round_sqrt(x: f32, y: f32) -> f32 {
-    let xd = f64::from(x);
     let mut y = y;
     for _ in 0..3 {
-        let up = y.next_up();
-        let mid_up = (f64::from(y) + f64::from(up)) * 0.5;
-        if mid_up * mid_up < xd {
-            y = up;
+        if midpoint_square_cmp(y, x).is_lt() {
+            y = y.next_up();
             continue;
         }
         let down = y.next_down();
-        let mid_down = (f64::from(y) + f64::from(down)) * 0.5;
-        if mid_down * mid_down > xd {
+        if midpoint_square_cmp(down, x).is_gt() {
             y = down;
             continue;
         }
         break;
     }
     y
+}
+
+/// A normal positive `x` as `(m, e)` with `x = m · 2^e`, `m` its 24-bit
+/// significand.
+#[inline]
+fn significand(x: f32) -> (u64, i32) {
+    let bits = x.to_bits();
+    let m = u64::from((bits & 0x007F_FFFF) | 0x0080_0000);
+    let e = ((bits >> 23) & 0xFF) as i32 - 150;
+    (m, e)
+}
+
+/// `mid² − x` compared with zero, exactly, where `mid` is the midpoint
+/// between `a` and the next `f32` up (`a`, `x` normal and positive).
+///
+/// With `a = m·2^e`, the next `f32` up is `(m + 1)·2^e` (also across a
+/// binade: `2^24·2^e = 2^23·2^(e+1)`), so `mid = (2m + 1)·2^(e−1)` and
+/// `mid² = (2m + 1)²·2^(2e−2)`, an integer below 2^50 times a power of two,
+/// compared with `x = mx·2^ex` (`mx < 2^24`) by shifting `mx`.
+#[inline]
+fn midpoint_square_cmp(a: f32, x: f32) -> core::cmp::Ordering {
+    let (m, e) = significand(a);
+    let (mx, ex) = significand(x);
+    let odd = 2 * m + 1;
+    let square = odd * odd;
+    // mid² − x has the sign of square · 2^d − mx.
+    let d = 2 * (e - 1) - ex;
+    if d >= 0 {
+        // square ≥ (2^24 + 1)² > 2^48 > mx.
+        core::cmp::Ordering::Greater
+    } else if d <= -28 {
+        // mx · 2^28 ≥ 2^51 > square.
+        core::cmp::Ordering::Less
+    } else {
+        square.cmp(&(mx << d.unsigned_abs()))
+    }
 }
 
 // Cody–Waite split of π/2: P1 and P2 have 8 significant bits, so k·P1 and k·P2
@@ -543,11 +577,12 @@ const SLERP_F: [[f32; 6]; 4] = [
 fn weight_poly(s: f32) -> [f32; 6] {
     let s2 = s * s;
     let [f0, f1, f2, f3] = SLERP_F;
-    let mut c = [0.0; 6];
-    for ((((ci, a), b), d), e) in c.iter_mut().zip(f0).zip(f1).zip(f2).zip(f3) {
-        *ci = s * (a + s2 * (b + s2 * (d + s2 * e)));
-    }
-    c
+    // Coefficient by coefficient (no iterator calls at opt-level "s").
+    let c = |i: usize| -> f32 {
+        let at = |f: [f32; 6]| f.get(i).copied().unwrap_or(0.0);
+        s * (at(f0) + s2 * (at(f1) + s2 * (at(f2) + s2 * at(f3))))
+    };
+    [c(0), c(1), c(2), c(3), c(4), c(5)]
 }
 
 /// Evaluates a degree-5 polynomial in `x` given `x²`, `x⁴` (Estrin's scheme:

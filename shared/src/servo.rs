@@ -73,20 +73,34 @@ impl Calibration {
         let u = if self.reversed { 1.0 - u } else { u };
         let pulse = self.pulse_min_us + u * (self.pulse_max_us - self.pulse_min_us) + self.trim_us;
         // max/min, not clamp: clamp asserts its bounds (a panic path).
-        pulse.max(self.pulse_low()).min(self.pulse_high())
+        min(max(pulse, self.pulse_low()), self.pulse_high())
     }
 
     /// The lowest pulse this channel may ever receive, µs.
     #[must_use]
     pub fn pulse_low(&self) -> f32 {
-        self.pulse_min_us.min(self.pulse_max_us)
+        min(self.pulse_min_us, self.pulse_max_us)
     }
 
     /// The highest pulse this channel may ever receive, µs.
     #[must_use]
     pub fn pulse_high(&self) -> f32 {
-        self.pulse_min_us.max(self.pulse_max_us)
+        max(self.pulse_min_us, self.pulse_max_us)
     }
+}
+
+/// `a.max(b)` by a comparison: the same for numbers and for a NaN `a` (the
+/// result is `b`), without `f32::max`'s library call on the Cortex-M4F
+/// (which has no `vmaxnm`).
+#[inline(always)]
+fn max(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// `a.min(b)` by a comparison (see [`max`]).
+#[inline(always)]
+fn min(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
 }
 
 /// Converts a pulse width in µs to the Maestro's quarter-microseconds, rounding
@@ -221,7 +235,7 @@ impl Slew {
         let dist = target - here;
         // The fastest speed from which we can still stop within `dist`:
         // v² ≤ 2·a·d, in whole units per frame.
-        let brake = stopping_speed(dist.unsigned_abs(), amax);
+        let brake = capped_stopping_speed(dist.unsigned_abs(), amax, vmax);
         let wanted = dist.signum() * dist.abs().min(brake).min(vmax);
         let step = wanted
             .max(self.step - amax)
@@ -243,10 +257,15 @@ fn stopping_speed(dist: u32, accel: i32) -> i32 {
     let a = accel.max(1) as u32;
     let mut v = 0u32;
     // The braking distance is about v²/2a: seed with √(2ad), then correct
-    // against the exact integer sum (a step or two either way).
-    let seed = crate::math::sqrt(2.0 * dist as f32 * a as f32);
-    if seed.is_finite() && seed > 0.0 {
-        v = seed as u32;
+    // against the exact integer sum (a step or two either way). The answer
+    // is that integer search's, whatever the seed, so the seed need not be
+    // the correctly rounded root: x·(1/√x) with the fast reciprocal root.
+    let x = 2.0 * dist as f32 * a as f32;
+    if x >= 1.0 {
+        let seed = x * crate::math::rsqrt(x);
+        if seed.is_finite() && seed > 0.0 {
+            v = seed as u32;
+        }
     }
     while v > 0 && braking_distance(v, a) > u64::from(dist) {
         v -= 1;
@@ -257,12 +276,27 @@ fn stopping_speed(dist: u32, accel: i32) -> i32 {
     v.min(i32::MAX as u32) as i32
 }
 
+/// `stopping_speed(dist, accel).min(vmax)` (`vmax ≥ 0`). When even the top
+/// speed stops in time the brake does not bind, and the exact stopping
+/// speed (at least `vmax` then: the braking distance grows with the speed)
+/// is not needed.
+fn capped_stopping_speed(dist: u32, accel: i32, vmax: i32) -> i32 {
+    let a = accel.max(1).unsigned_abs();
+    if braking_distance(vmax.unsigned_abs(), a) <= u64::from(dist) {
+        vmax
+    } else {
+        stopping_speed(dist, accel).min(vmax)
+    }
+}
+
 /// Distance covered by the steps v, v−a, v−2a, … while they are positive.
 fn braking_distance(v: u32, a: u32) -> u64 {
-    let v = u64::from(v);
-    let a = u64::from(a.max(1));
     // Terms v − k·a for k = 0..=n with n = ⌊v/a⌋ (the last one may be zero).
-    let n = v / a;
+    // The division in 32 bits (one instruction on the Cortex-M4; a 64-bit
+    // one is a library call), the sum in 64.
+    let a = a.max(1);
+    let n = u64::from(v / a);
+    let (v, a) = (u64::from(v), u64::from(a));
     n * v - a * n * (n + 1) / 2 + v
 }
 
@@ -301,6 +335,39 @@ pub mod maestro {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stopping_speed_is_the_largest_speed_that_stops_in_time() {
+        // The integer search's answer, whatever the seed: the largest v whose
+        // braking distance fits, found by brute force.
+        for accel in [1, 2, 3, 7, 40, 1000, 65_535] {
+            for dist in (0..3000).chain([65_535, 1 << 20]) {
+                let v = stopping_speed(dist, accel);
+                let a = accel as u32;
+                assert!(braking_distance(v as u32, a) <= u64::from(dist) || v == 0);
+                assert!(
+                    braking_distance(v as u32 + 1, a) > u64::from(dist),
+                    "{dist} {accel}"
+                );
+            }
+        }
+        for accel in [1, 3, 40, 65_535] {
+            for vmax in [0, 1, 2, 7, 100, 65_535] {
+                for dist in (0..2000).chain([65_535, 1 << 20]) {
+                    assert_eq!(
+                        capped_stopping_speed(dist, accel, vmax),
+                        stopping_speed(dist, accel).min(vmax),
+                        "{dist} {accel} {vmax}"
+                    );
+                }
+            }
+        }
+        // The distance of v, v - a, ... summed directly.
+        for (v, a) in [(0u32, 1u32), (7, 2), (10, 3), (9, 3), (1000, 7), (5, 40)] {
+            let direct: u64 = (0..=v / a).map(|k| u64::from(v - k * a)).sum();
+            assert_eq!(braking_distance(v, a), direct, "{v} {a}");
+        }
+    }
 
     #[test]
     fn maestro_bytes_match_the_pololu_manual_example() {

@@ -19,7 +19,7 @@ use cortex_m_rt::entry;
 use glam::Quat;
 use glam::Vec3;
 use marionette_core::body::{Angles, cmu};
-use marionette_core::frame::{Cycles, Performer, Region, stage};
+use marionette_core::frame::{Cycles, Region, stage};
 use marionette_core::goal::{Goal, GoalSet, Target};
 use marionette_core::grid::{Axis, Grid, Query, SliceSamples};
 use marionette_core::math;
@@ -28,6 +28,7 @@ use marionette_core::solve::{self, Method, Solver, SolverState};
 use marionette_core::wire::{
     self, Command, CommandKind, List, MAX_FRAME, Message, Sensor, TrackerFrame,
 };
+use marionette_firmware::app::{self, BoardPerformer};
 use marionette_firmware::board::qemu::exit;
 use marionette_firmware::console::Line;
 use marionette_firmware::icount::Counter;
@@ -284,7 +285,7 @@ impl Cycles for SysTickCycles {
 }
 
 /// Feeds one encoded message to the performer.
-fn feed(performer: &mut Performer<'_, '_>, msg: &Message, now_us: u32) {
+fn feed(performer: &mut BoardPerformer<'_, '_>, msg: &Message, now_us: u32) {
     let mut buf = [0u8; MAX_FRAME];
     if let Ok(frame) = wire::encode(msg, &mut buf) {
         let mut input: &[u8] = frame;
@@ -317,10 +318,11 @@ fn tracker_frame(i: u32) -> Message {
 }
 
 /// The whole live loop per tracker frame on the table region's rig
-/// (`humanoid16`, 3 parameters, 4 goals), by stage.
+/// (`humanoid16`, 3 parameters, 4 goals), by stage, at the `perform`
+/// firmware's capacity.
 fn frame_rows(counter: &mut Counter) {
-    let region = Region::parse(region::tables());
-    let Some(mut performer) = Performer::new(&region) else {
+    let region = Region::<{ app::SEGMENTS }>::parse_sized(region::tables());
+    let Some(mut performer) = BoardPerformer::new(&region) else {
         Line::new().str("frame: no rig in the table region").print();
         return;
     };

@@ -251,23 +251,33 @@ impl Joint {
     /// (unused entries are ignored): `R_a(θ₀)·R_b(θ₁)·R_c(θ₂)`.
     #[must_use]
     pub fn rotation(&self, values: &[f32; 3]) -> Quat {
-        let mut dofs = self.dofs().iter().zip(values);
-        let Some((first, &v)) = dofs.next() else {
-            return Quat::IDENTITY;
-        };
-        dofs.fold(first.axis.rotation(v), |q, (d, &v)| {
-            d.axis.rotate_after(q, v)
-        })
+        // By count, not an iterator fold: the same products in the same
+        // order, without iterator calls at opt-level "s" (forward
+        // kinematics calls this for every joint).
+        let [a, b, c] = &self.dofs;
+        let [x, y, z] = *values;
+        match self.count {
+            1 => a.axis.rotation(x),
+            2 => b.axis.rotate_after(a.axis.rotation(x), y),
+            3 => c
+                .axis
+                .rotate_after(b.axis.rotate_after(a.axis.rotation(x), y), z),
+            _ => Quat::IDENTITY,
+        }
     }
 
     /// `values` clamped to the limits; unused entries set to 0.
     #[must_use]
     pub fn clamp(&self, values: &[f32; 3]) -> [f32; 3] {
-        let mut out = [0.0; 3];
-        for ((o, d), &v) in out.iter_mut().zip(self.dofs()).zip(values) {
-            *o = d.clamp(v);
+        // By count, as in `rotation` (no iterator calls at opt-level "s").
+        let [a, b, c] = &self.dofs;
+        let [x, y, z] = *values;
+        match self.count {
+            1 => [a.clamp(x), 0.0, 0.0],
+            2 => [a.clamp(x), b.clamp(y), 0.0],
+            3 => [a.clamp(x), b.clamp(y), c.clamp(z)],
+            _ => [0.0; 3],
         }
-        out
     }
 
     /// How far `values` lie outside the limits (largest excess, radians).
@@ -297,7 +307,8 @@ impl Joint {
                 self.clamp(&[2.0 * math::atan2(a.axis.component(q.xyz()), q.w), 0.0, 0.0])
             }
             [a, b, _] if self.count == 2 => {
-                self.best_euler(euler(q, a.axis, b.axis, a.axis.third(b.axis)))
+                // The third angle is dropped: not computed.
+                self.best_euler(euler_in(q, [a.axis, b.axis, a.axis.third(b.axis)], false))
             }
             [a, b, c] if self.count == 3 => self.best_euler(euler(q, a.axis, b.axis, c.axis)),
             _ => [0.0; 3],
@@ -306,8 +317,17 @@ impl Joint {
 
     /// Of the two Euler solutions, the clamped one that moves least from the exact one.
     fn best_euler(&self, (first, second): ([f32; 3], [f32; 3])) -> [f32; 3] {
-        let cost =
-            |v: &[f32; 3]| -> f32 { self.dofs().iter().zip(v).map(|(d, &x)| d.excess(x)).sum() };
+        // The summed excess, by count (no iterator calls at opt-level "s");
+        // the same comparison as a `sum()` from −0.
+        let [a, b, c] = &self.dofs;
+        let cost = |&[x, y, z]: &[f32; 3]| -> f32 {
+            match self.count {
+                1 => a.excess(x),
+                2 => a.excess(x) + b.excess(y),
+                3 => a.excess(x) + b.excess(y) + c.excess(z),
+                _ => 0.0,
+            }
+        };
         if cost(&second) < cost(&first) {
             self.clamp(&second)
         } else {
@@ -344,6 +364,13 @@ pub fn wrap_angle(a: f32) -> f32 {
 /// the one with `|β| <= π/2` first, then `(α+π, π−β, γ+π)`, all wrapped to (−π, π].
 #[must_use]
 pub fn euler(q: Quat, i: Axis, j: Axis, k: Axis) -> ([f32; 3], [f32; 3]) {
+    euler_in(q, [i, j, k], true)
+}
+
+/// [`euler`]; without `gamma`, the third angle is left 0 in the first
+/// solution and π in the second (for a 2-DOF joint, which drops it).
+#[inline(always)]
+fn euler_in(q: Quat, [i, j, k]: [Axis; 3], gamma: bool) -> ([f32; 3], [f32; 3]) {
     let m = Mat3::from_quat(q);
     let even = matches!(
         (i, j),
@@ -358,7 +385,11 @@ pub fn euler(q: Quat, i: Axis, j: Axis, k: Axis) -> ([f32; 3], [f32; 3]) {
     } else {
         (
             math::atan2(-s * element(&m, j, k), element(&m, k, k)),
-            math::atan2(-s * element(&m, i, j), element(&m, i, i)),
+            if gamma {
+                math::atan2(-s * element(&m, i, j), element(&m, i, i))
+            } else {
+                0.0
+            },
         )
     };
     let first = [alpha, beta, gamma];
@@ -612,7 +643,12 @@ impl<const N: usize> Angles<N> {
 
     /// Clamps every angle into its joint's limits (unused entries become 0).
     pub fn clamp_to_limits(&mut self, body: &Body<'_>) {
-        for (v, s) in self.values.iter_mut().zip(body.segments).skip(1) {
+        // Sliced past the root rather than `skip(1)` (a call at opt-level "s").
+        let (Some(values), Some(segments)) = (self.values.get_mut(1..), body.segments.get(1..))
+        else {
+            return;
+        };
+        for (v, s) in values.iter_mut().zip(segments) {
             *v = s.joint.clamp(v);
         }
     }
@@ -675,24 +711,49 @@ impl<const N: usize> Angles<N> {
 
     /// Projects a local pose (e.g. a synthesized one, converted with
     /// [`pose::to_local`]) onto the joints' degrees of freedom, within limits.
-    /// The root keeps its full placement.
+    /// The root keeps its full placement. Like [`Angles::to_local`], this
+    /// trusts the body's structure (see [`Body::validate`]).
     pub fn from_local(body: &Body<'_>, local: &LocalPose<N>) -> Result<Self, BodyError> {
-        let mut a = Self::rest(body)?;
+        let mut a = Angles {
+            count: 0,
+            root_position: Vec3::ZERO,
+            root_rotation: Quat::IDENTITY,
+            values: [[0.0; 3]; N],
+        };
+        a.set_from_local(body, local)?;
+        Ok(a)
+    }
+
+    /// [`Angles::from_local`] in place (the live loop's per-frame
+    /// conversion, without a copy of the state). On an error `self` is left
+    /// unchanged.
+    pub fn set_from_local(
+        &mut self,
+        body: &Body<'_>,
+        local: &LocalPose<N>,
+    ) -> Result<(), BodyError> {
+        if body.is_empty() {
+            return Err(BodyError::Empty);
+        }
+        let Some((used, unused)) = self.values.split_at_mut_checked(body.len()) else {
+            return Err(BodyError::TooManySegments);
+        };
         if local.count != body.len() {
             return Err(BodyError::CountMismatch);
         }
-        a.root_position = local.root_position;
-        a.root_rotation = local.rotations.first().copied().unwrap_or(Quat::IDENTITY);
-        for ((v, s), &q) in a
-            .values
+        self.count = body.len();
+        self.root_position = local.root_position;
+        self.root_rotation = local.rotations.first().copied().unwrap_or(Quat::IDENTITY);
+        for (i, ((v, s), &q)) in used
             .iter_mut()
             .zip(body.segments)
             .zip(&local.rotations)
-            .skip(1)
+            .enumerate()
         {
-            *v = s.joint.project(q);
+            *v = if i == 0 { [0.0; 3] } else { s.joint.project(q) };
         }
-        Ok(a)
+        unused.fill([0.0; 3]);
+        Ok(())
     }
 }
 

@@ -371,8 +371,13 @@ impl GoalMap {
 
 /// The whole rig, as serialized in the rig blob (postcard; fields in this
 /// order, see [`super`] for the byte layout).
+///
+/// `N` is the capacity of the segment list (default [`MAX_SEGMENTS`], the
+/// format's limit): it does not change the encoding. A firmware that holds
+/// smaller rigs decodes into a smaller description (see
+/// [`super::Rig::parse_sized`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RigDesc<'a> {
+pub struct RigDesc<'a, const N: usize = MAX_SEGMENTS> {
     /// Rig name, ≤ [`RIG_NAME_LEN`] bytes.
     pub name: &'a str,
     /// Control-loop period, µs (100 ..= 100 000).
@@ -387,7 +392,7 @@ pub struct RigDesc<'a> {
     /// The servo back-end.
     pub output: Output,
     /// The skeleton, root first, parents before children.
-    pub segments: List<SegmentDesc<'a>, MAX_SEGMENTS>,
+    pub segments: List<SegmentDesc<'a>, N>,
     /// The servo channels.
     pub servos: List<ServoDesc, MAX_SERVOS>,
     /// Sensor → parameter entries.
@@ -469,7 +474,9 @@ impl<'a> RigDesc<'a> {
             goals: List::new(),
         }
     }
+}
 
+impl<const N: usize> RigDesc<'_, N> {
     /// The number of segments.
     #[must_use]
     pub fn segment_count(&self) -> usize {

@@ -57,6 +57,14 @@
 //! `[w, x, y, z]`, as everywhere in Marionette. A segment's frame is at its
 //! joint origin; at rest (all angles zero) every frame is parallel to the
 //! root's (see [`crate::body`]).
+//!
+//! # Capacity
+//!
+//! A [`Rig`] holds its segment arrays and rest pose for at most `N` segments
+//! (a const parameter, default [`MAX_SEGMENTS`], the format's limit). A board
+//! with little RAM instantiates a smaller one, e.g. `Rig<'_, 32>` (every
+//! shipped rig fits): [`Rig::parse_sized`] and [`Rig::from_desc_sized`]
+//! refuse a rig with more segments with [`RigError::Capacity`].
 
 mod desc;
 pub mod sensor;
@@ -175,6 +183,14 @@ pub enum RigError {
     /// The body module refused the skeleton (cannot happen after validation;
     /// kept so that no error is swallowed).
     Body(BodyError),
+    /// The rig is valid but has more segments than the [`Rig`]'s capacity
+    /// `N` (the build's limit, below the format's [`MAX_SEGMENTS`]).
+    Capacity {
+        /// The rig's segments.
+        segments: u8,
+        /// The capacity.
+        capacity: u8,
+    },
 }
 
 impl From<BodyError> for RigError {
@@ -246,10 +262,39 @@ impl<'a> RigDesc<'a> {
     /// Decodes a blob's description without validating it (for inspection);
     /// returns it and the bytes after the blob.
     pub fn from_blob(bytes: &'a [u8]) -> Result<(Self, &'a [u8]), RigError> {
+        Self::from_blob_sized(bytes)
+    }
+}
+
+/// The head of a description, up to the length of its segment list: the
+/// fields of [`RigDesc`] before `segments`, in order (postcard writes a list
+/// length as the same varint as a `u32`).
+type DescHead<'a> = (&'a str, u32, u32, [f32; 3], [f32; 4], Output, u32);
+
+impl<'a, const N: usize> RigDesc<'a, N> {
+    /// [`RigDesc::from_blob`] into a segment list of capacity `N`: a
+    /// description that does not decode at this capacity but whose segment
+    /// count is above `N` (and within the format's [`MAX_SEGMENTS`]) is
+    /// refused with [`RigError::Capacity`] (the envelope's CRC has already
+    /// been checked, so that is what it holds). Never inlined: the decoder's
+    /// temporaries stay in this call's stack frame.
+    #[inline(never)]
+    pub(crate) fn from_blob_sized(bytes: &'a [u8]) -> Result<(Self, &'a [u8]), RigError> {
         let (desc, rest) = envelope(bytes)?;
-        match postcard::take_from_bytes::<RigDesc<'a>>(desc) {
+        match postcard::take_from_bytes::<Self>(desc) {
             Ok((d, [])) => Ok((d, rest)),
-            _ => Err(RigError::Decode),
+            Ok(_) => Err(RigError::Decode),
+            Err(_) => match postcard::take_from_bytes::<DescHead<'a>>(desc) {
+                Ok(((.., segments), _))
+                    if usize::try_from(segments).is_ok_and(|s| N < s && s <= MAX_SEGMENTS) =>
+                {
+                    Err(RigError::Capacity {
+                        segments: u8::try_from(segments).unwrap_or(u8::MAX),
+                        capacity: u8::try_from(N).unwrap_or(u8::MAX),
+                    })
+                }
+                _ => Err(RigError::Decode),
+            },
         }
     }
 
@@ -309,10 +354,10 @@ const EMPTY_SEGMENT: Segment<'static> = Segment {
 };
 
 /// A rig ready for the live loop: the arrays a [`Body`] borrows, the rest
-/// pose, the servo channels and the sensor mapping. Names borrow from the
-/// blob (`'a`).
+/// pose, the servo channels and the sensor mapping, for at most `N` segments
+/// (see [Capacity](self#capacity)). Names borrow from the blob (`'a`).
 #[derive(Clone, Debug)]
-pub struct Rig<'a> {
+pub struct Rig<'a, const N: usize = MAX_SEGMENTS> {
     name: &'a str,
     frame_period_us: u32,
     failsafe_timeout_ms: u32,
@@ -320,10 +365,10 @@ pub struct Rig<'a> {
     root_position: Vec3,
     root_rotation: Quat,
     count: usize,
-    segments: [Segment<'a>; MAX_SEGMENTS],
-    parents: [u8; MAX_SEGMENTS],
-    offsets: [Vec3; MAX_SEGMENTS],
-    rest: Pose<MAX_SEGMENTS>,
+    segments: [Segment<'a>; N],
+    parents: [u8; N],
+    offsets: [Vec3; N],
+    rest: Pose<N>,
     servos: List<ServoDesc, MAX_SERVOS>,
     params: List<ParamMap, MAX_PARAMS>,
     goals: List<GoalMap, MAX_GOALS>,
@@ -351,16 +396,80 @@ fn unit_quat(q: Quat) -> Quat {
 impl<'a> Rig<'a> {
     /// Checks and decodes a rig blob (see the module doc); returns the rig and
     /// the bytes after the blob. Every field is validated
-    /// ([`RigDesc::validate`]); nothing panics on any input.
+    /// ([`RigDesc::validate`]); nothing panics on any input. The rig has the
+    /// format's capacity; [`Rig::parse_sized`] makes a smaller one.
     pub fn parse(bytes: &'a [u8]) -> Result<(Self, &'a [u8]), RigError> {
-        let (desc, rest) = RigDesc::from_blob(bytes)?;
-        Ok((Self::from_desc(&desc)?, rest))
+        Self::parse_sized(bytes)
     }
 
-    /// Validates a description and builds the runtime rig.
+    /// Validates a description and builds the runtime rig (at the format's
+    /// capacity; see [`Rig::from_desc_sized`]).
     pub fn from_desc(desc: &RigDesc<'a>) -> Result<Self, RigError> {
+        Self::from_desc_sized(desc)
+    }
+
+    /// The joint angle a servo follows, from a joint state (`None` if the
+    /// state does not cover the servo's segment).
+    #[must_use]
+    pub fn servo_angle<const N: usize>(servo: &ServoDesc, angles: &Angles<N>) -> Option<f32> {
+        angles
+            .get(usize::from(servo.segment))?
+            .get(usize::from(servo.dof))
+            .copied()
+    }
+}
+
+impl<'a, const N: usize> Rig<'a, N> {
+    /// [`Rig::parse`] into a rig of capacity `N`: a valid rig with more than
+    /// `N` segments is refused with [`RigError::Capacity`].
+    pub fn parse_sized(bytes: &'a [u8]) -> Result<(Self, &'a [u8]), RigError> {
+        let mut slot = None;
+        let rest = Self::parse_into(bytes, &mut slot)?;
+        slot.map(|rig| (rig, rest)).ok_or(RigError::Truncated)
+    }
+
+    /// [`Rig::parse_sized`] into `slot` (set to the rig on success, `None`
+    /// on an error), for a caller that keeps the rig in place: a rig is
+    /// kilobytes, and every move is a copy on the stack. Returns the bytes
+    /// after the blob. Never inlined: the decoded description stays in this
+    /// call's stack frame.
+    #[inline(never)]
+    pub fn parse_into(bytes: &'a [u8], slot: &mut Option<Self>) -> Result<&'a [u8], RigError> {
+        *slot = None;
+        // Borrowed where it was returned: no copy of the description.
+        let parsed = RigDesc::<N>::from_blob_sized(bytes);
+        let (desc, rest) = match &parsed {
+            Ok((desc, rest)) => (desc, *rest),
+            Err(e) => return Err(*e),
+        };
+        Self::from_desc_into(desc, slot)?;
+        Ok(rest)
+    }
+
+    /// [`Rig::from_desc`] into a rig of capacity `N`: a valid rig with more
+    /// than `N` segments is refused with [`RigError::Capacity`].
+    pub fn from_desc_sized<const M: usize>(desc: &RigDesc<'a, M>) -> Result<Self, RigError> {
+        let mut slot = None;
+        Self::from_desc_into(desc, &mut slot)?;
+        slot.ok_or(RigError::Truncated)
+    }
+
+    /// [`Rig::from_desc_sized`] into `slot` (see [`Rig::parse_into`]).
+    /// Never inlined: its temporaries stay in this call's stack frame.
+    #[inline(never)]
+    pub fn from_desc_into<const M: usize>(
+        desc: &RigDesc<'a, M>,
+        slot: &mut Option<Self>,
+    ) -> Result<(), RigError> {
+        *slot = None;
         desc.validate()?;
-        let mut rig = Rig {
+        if desc.segments.len() > N {
+            return Err(RigError::Capacity {
+                segments: u8::try_from(desc.segments.len()).unwrap_or(u8::MAX),
+                capacity: u8::try_from(N).unwrap_or(u8::MAX),
+            });
+        }
+        let rig = slot.insert(Rig {
             name: desc.name,
             frame_period_us: desc.frame_period_us,
             failsafe_timeout_ms: desc.failsafe_timeout_ms,
@@ -368,15 +477,15 @@ impl<'a> Rig<'a> {
             root_position: Vec3::from_array(desc.root_position),
             root_rotation: unit_quat(quat_wxyz(desc.root_rotation)),
             count: desc.segments.len(),
-            segments: [EMPTY_SEGMENT; MAX_SEGMENTS],
-            parents: [NO_PARENT; MAX_SEGMENTS],
-            offsets: [Vec3::ZERO; MAX_SEGMENTS],
+            segments: [EMPTY_SEGMENT; N],
+            parents: [NO_PARENT; N],
+            offsets: [Vec3::ZERO; N],
             rest: Pose::default(),
             servos: desc.servos,
             params: desc.params,
             goals: desc.goals,
             hash: desc.rig_hash(),
-        };
+        });
         for (((seg, parent), offset), d) in rig
             .segments
             .iter_mut()
@@ -394,14 +503,22 @@ impl<'a> Rig<'a> {
             *parent = d.parent;
             *offset = seg.origin;
         }
-        rig.rest = rig.compute_rest()?;
-        Ok(rig)
+        match rig.compute_rest() {
+            Ok(pose) => {
+                rig.rest = pose;
+                Ok(())
+            }
+            Err(e) => {
+                *slot = None;
+                Err(e)
+            }
+        }
     }
 
-    fn compute_rest(&self) -> Result<Pose<MAX_SEGMENTS>, RigError> {
+    fn compute_rest(&self) -> Result<Pose<N>, RigError> {
         let body = self.body();
         body.validate()?;
-        let angles = self.rest_angles::<MAX_SEGMENTS>()?;
+        let angles = self.rest_angles::<N>()?;
         let mut local = LocalPose::default();
         let mut pose = Pose::default();
         angles.forward(&body, &mut local, &mut pose)?;
@@ -488,8 +605,8 @@ impl<'a> Rig<'a> {
 
     /// The rest joint state: the root at its rest placement, every angle zero
     /// clamped into its limits.
-    pub fn rest_angles<const N: usize>(&self) -> Result<Angles<N>, BodyError> {
-        let mut a = Angles::<N>::rest(&self.body())?;
+    pub fn rest_angles<const M: usize>(&self) -> Result<Angles<M>, BodyError> {
+        let mut a = Angles::<M>::rest(&self.body())?;
         a.root_position = self.root_position;
         a.root_rotation = self.root_rotation;
         Ok(a)
@@ -497,18 +614,8 @@ impl<'a> Rig<'a> {
 
     /// The world pose of [`Rig::rest_angles`].
     #[must_use]
-    pub fn rest_pose(&self) -> &Pose<MAX_SEGMENTS> {
+    pub fn rest_pose(&self) -> &Pose<N> {
         &self.rest
-    }
-
-    /// The joint angle a servo follows, from a joint state (`None` if the
-    /// state does not cover the servo's segment).
-    #[must_use]
-    pub fn servo_angle<const N: usize>(servo: &ServoDesc, angles: &Angles<N>) -> Option<f32> {
-        angles
-            .get(usize::from(servo.segment))?
-            .get(usize::from(servo.dof))
-            .copied()
     }
 }
 
@@ -589,6 +696,36 @@ mod tests {
         // Rest: the lower segment's origin at 0.1 + 0.3 above the root.
         let p = rig.rest_pose().positions[2];
         assert!((p - Vec3::new(0.0, 0.4, 0.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn a_rig_over_the_capacity_is_refused() {
+        let d = arm();
+        let mut buf = [0u8; 600];
+        let n = d.to_blob(&mut buf).unwrap();
+        let over = RigError::Capacity {
+            segments: 3,
+            capacity: 2,
+        };
+        assert_eq!(Rig::<'_, 2>::parse_sized(&buf[..n]).err(), Some(over));
+        assert_eq!(Rig::<'_, 2>::from_desc_sized(&d).err(), Some(over));
+        let mut slot = None;
+        assert_eq!(Rig::<'_, 2>::parse_into(&buf[..n], &mut slot), Err(over));
+        assert!(slot.is_none());
+        // At capacity it parses, and equals the full-capacity rig.
+        let (small, rest) = Rig::<'_, 3>::parse_sized(&buf[..n]).unwrap();
+        let (full, _) = Rig::parse(&buf[..n]).unwrap();
+        assert!(rest.is_empty());
+        assert_eq!(small.body().segments, full.body().segments);
+        assert_eq!(small.rest_pose().positions(), full.rest_pose().positions());
+        assert_eq!(small.rig_hash(), full.rig_hash());
+        // A damaged blob is a CRC error at any capacity.
+        let mut bad = buf;
+        bad[PREFIX_LEN + 2] ^= 1;
+        assert_eq!(
+            Rig::<'_, 2>::parse_sized(&bad[..n]).err(),
+            Some(RigError::Crc)
+        );
     }
 
     #[test]

@@ -127,7 +127,7 @@ fn twist(q: Quat, axis: super::AxisName) -> f32 {
     2.0 * math::atan2(axis.to_body().component(q.xyz()), q.w)
 }
 
-impl Rig<'_> {
+impl<const N: usize> Rig<'_, N> {
     /// The placement of a reference frame (`None` = world).
     fn reference(&self, frame: RefFrame, sensors: &[Sensor]) -> Result<Option<Placement>, Skip> {
         match frame {

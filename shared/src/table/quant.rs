@@ -275,7 +275,13 @@ pub fn decode_sample(bytes: &[u8; SAMPLE_LEN], scale: f32) -> (Vec3, Quat) {
     let [w0 @ .., _, _, _, _, _, _, _, _] = bytes;
     let [_, _, _, _, w1 @ .., _, _, _, _] = bytes;
     let [_, _, _, _, _, _, _, _, w2 @ ..] = bytes;
-    let [w0, w1, w2] = [w0, w1, w2].map(|w| u32::from_le_bytes(*w));
+    // Written out, not `[..].map(..)`: at opt-level "s" the array map is an
+    // out-of-line loop on the firmware's hottest path.
+    let (w0, w1, w2) = (
+        u32::from_le_bytes(*w0),
+        u32::from_le_bytes(*w1),
+        u32::from_le_bytes(*w2),
+    );
     // `as i16` keeps the low 16 bits: the two's-complement code.
     let codes = [w0 as i16, (w0 >> 16) as i16, w1 as i16];
     (

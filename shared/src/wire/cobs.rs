@@ -150,6 +150,20 @@ impl Decoder {
         }
     }
 
+    /// Data bytes still expected in the current block (`0` when the next
+    /// byte is a code byte or the delimiter).
+    #[must_use]
+    pub const fn pending_data(&self) -> usize {
+        self.left as usize
+    }
+
+    /// Accounts for `n ≤` [`Decoder::pending_data`] non-zero data bytes
+    /// taken as a run: the same state as [`Decoder::push`] of each of them,
+    /// which would return each as [`Step::Byte`].
+    pub fn skip_data(&mut self, n: usize) {
+        self.left = self.left.saturating_sub(u8::try_from(n).unwrap_or(u8::MAX));
+    }
+
     /// Feeds one encoded byte. On `0x00` the decoder resets for the next
     /// packet and reports whether the packet ended on a block boundary.
     pub fn push(&mut self, b: u8) -> Step {

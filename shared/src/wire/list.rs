@@ -85,6 +85,12 @@ impl<T, const N: usize> List<T, N> {
         N
     }
 
+    /// Removes every item (in place: cheaper than assigning a new list,
+    /// which writes the whole capacity).
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
     /// Iterates over the items.
     pub fn iter(&self) -> core::slice::Iter<'_, T> {
         self.as_slice().iter()
@@ -170,6 +176,10 @@ mod tests {
         assert_eq!(l.as_slice(), &[7, 9]);
         assert_eq!(l.len(), 2);
         assert_eq!(l.capacity(), 2);
+        l.clear();
+        assert!(l.is_empty());
+        l.push(3).unwrap();
+        assert_eq!(l.as_slice(), &[3]);
         assert_eq!(
             List::<u8, 2>::from_slice(&[1, 2, 3]),
             Err(WireError::BufferFull)

@@ -180,6 +180,9 @@ pub enum StatusReason {
     /// Tag 9: the table is valid but of a kind this firmware cannot perform
     /// (for example a clip table where a static grid is needed).
     Unsupported,
+    /// Tag 10: the rig blob is valid but has more segments than this
+    /// firmware's capacity (nothing to drive).
+    RigTooLarge,
 }
 
 /// The board's state and counters.

@@ -98,7 +98,7 @@ impl<const N: usize> Receiver<N> {
     pub fn push(&mut self, byte: u8) -> Option<Incoming> {
         let frame = self.reader.push(byte, &mut self.errors)?;
         let msg = decode_frame(frame);
-        self.accept(msg)
+        self.accept(&msg)
     }
 
     /// Feeds bytes from `input` until a message is accepted, advancing
@@ -109,15 +109,21 @@ impl<const N: usize> Receiver<N> {
                 break;
             };
             let msg = decode_frame(frame);
-            if let Some(incoming) = self.accept(msg) {
+            if let Some(incoming) = self.accept(&msg) {
                 return Some(incoming);
             }
         }
         None
     }
 
-    fn accept(&mut self, msg: Result<Message, WireError>) -> Option<Incoming> {
-        match msg.and_then(|m| self.handle(m)) {
+    /// The message by reference: it is hundreds of bytes, and each move
+    /// a copy.
+    fn accept(&mut self, msg: &Result<Message, WireError>) -> Option<Incoming> {
+        let handled = match msg {
+            Ok(m) => self.handle(m),
+            Err(e) => Err(*e),
+        };
+        match handled {
             Ok(incoming) => {
                 if !matches!(
                     incoming,
@@ -137,7 +143,7 @@ impl<const N: usize> Receiver<N> {
         }
     }
 
-    fn handle(&mut self, msg: Message) -> Result<Incoming, WireError> {
+    fn handle(&mut self, msg: &Message) -> Result<Incoming, WireError> {
         match msg {
             Message::Hello(h) => Ok(self.hello(h.protocol_version)),
             Message::Status(_) | Message::Telemetry(_) | Message::Ack(_) => {
