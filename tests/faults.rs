@@ -623,14 +623,15 @@ fn a_rig_for_a_servo_back_end_the_board_lacks_is_refused() {
     assert_eq!(why, StatusReason::Unsupported);
 }
 
-/// The firmware holds rigs of at most 32 segments (its RAM budget): a valid
-/// rig with more is refused at boot with its own reason, like a missing rig.
+/// The firmware holds rigs of at most 24 segments (its RAM budget): a valid
+/// rig with one more is refused at boot with its own reason, like a missing
+/// rig.
 #[test]
 fn a_rig_over_the_firmware_capacity_is_refused() {
     let rig16 = humanoid16();
     let mut desc = rig16.desc();
-    // Rigid segments hanging from the root, named n00, n01, ...: 40 in all.
-    let names: Vec<String> = (0..40).map(|i| format!("n{i:02}")).collect();
+    // Rigid segments hanging from the root, named n00, n01, ...: 25 in all.
+    let names: Vec<String> = (0..25).map(|i| format!("n{i:02}")).collect();
     let mut extra = desc.segments.as_slice()[0];
     extra.parent = 0;
     extra.dofs = marionette_core::wire::List::new();
@@ -638,7 +639,7 @@ fn a_rig_over_the_firmware_capacity_is_refused() {
         extra.name = name;
         desc.segments.push(extra).unwrap();
     }
-    assert_eq!(desc.segments.len(), 40);
+    assert_eq!(desc.segments.len(), 25);
     let mut buf = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
     let n = desc.to_blob(&mut buf).unwrap();
     let why = refused(&perform::region(&buf[..n], None));

@@ -26,7 +26,7 @@ use marionette_core::grid::GridError;
 use marionette_core::pose::Pose;
 use marionette_core::rig::Rig;
 use marionette_core::servo::quarter_us;
-use marionette_core::solve::{self, Solver};
+use marionette_core::solve::{self, Solver, SolverState};
 use marionette_core::table::{self, Interp, Kind, Table, Wrap};
 use marionette_core::wire::{
     self, Ack, Command, CommandKind, Direction, ErrorCounters, FRAME_CAPACITY, FrameReader, Hello,
@@ -552,7 +552,8 @@ pub fn rig_blob(data: &[u8]) -> Outcome {
         table: None,
         reason: StatusReason::NoTable,
     };
-    if let Some(mut p) = Performer::new(&region) {
+    let mut solver = SolverState::new();
+    if let Some(mut p) = Performer::new(&region, &mut solver) {
         let mut run = Run::new(&p, &rig);
         run.feed(&mut p, &encode(&Message::Command(arm(1))));
         assert!(!p.armed(), "a board without a table never arms");
@@ -953,7 +954,8 @@ impl Run {
 /// servo to rest. Every output is checked by [`Run`].
 pub fn performer(data: &[u8]) -> Outcome {
     let region = Region::parse(humanoid16_region());
-    let mut p = Performer::new(&region).expect("the test region has a rig");
+    let mut solver = SolverState::new();
+    let mut p = Performer::new(&region, &mut solver).expect("the test region has a rig");
     let rig = region.rig.as_ref().expect("the test region has a rig");
     assert_eq!(p.reason(), StatusReason::Ok);
     let mut run = Run::new(&p, rig);

@@ -227,22 +227,24 @@ fn a_still_tracker_gives_a_still_figure() {
     assert!(drift(&poses[20], &poses[199]) < 1e-4, "the figure drifts");
 }
 
-/// A region is read at a capacity (the firmware's is 32 segments): a rig
+/// A region is read at a capacity (the firmware's is 24 segments): a rig
 /// with more segments is refused with its own reason, and nothing drives.
 #[test]
 fn a_rig_over_the_capacity_is_refused_as_too_large() {
     use marionette_core::frame::{Performer, Region};
+    use marionette_core::solve::SolverState;
     use marionette_core::wire::StatusReason;
     let rig = humanoid16();
     let region = perform::region(&rig_blob(&rig, None), Some(&rest_table(&rig)));
     let small = Region::<8>::parse_sized(&region);
     assert_eq!(small.reason, StatusReason::RigTooLarge);
     assert!(small.rig.is_none() && small.table.is_none());
-    assert!(Performer::new(&small).is_none());
+    assert!(Performer::new(&small, &mut SolverState::new()).is_none());
     let mut fits = Region::<16>::EMPTY;
     fits.parse_into(&region);
     assert_eq!(fits.reason, StatusReason::Ok);
-    let performer = Performer::new(&fits).expect("humanoid16 (13 segments) fits 16");
+    let mut solver = SolverState::new();
+    let performer = Performer::new(&fits, &mut solver).expect("humanoid16 (13 segments) fits 16");
     assert_eq!(
         performer.pose().len(),
         13,

@@ -25,7 +25,7 @@ use marionette_core::grid::{Axis, AxisKind, Grid, GridError, Interp, SliceSample
 use marionette_core::pose::{MAX_SEGMENTS, Pose};
 use marionette_core::rig::Rig;
 use marionette_core::servo::{Calibration, Slew, StepLimits, quarter_us};
-use marionette_core::solve::{self, Method, RootMode, Solver};
+use marionette_core::solve::{self, Method, RootMode, Solver, SolverState};
 use marionette_core::wire::{
     Command, CommandKind, List, MAX_SENSORS, Message, Params, Sensor, TrackerFrame,
 };
@@ -415,7 +415,8 @@ proptest! {
     #[test]
     fn the_fail_safe_always_reaches_rest(acts in prop::collection::vec(act(), 1..40)) {
         let region = Region::parse(fuzz_targets::humanoid16_region());
-        let mut p = Performer::new(&region).expect("rig");
+        let mut solver = SolverState::new();
+        let mut p = Performer::new(&region, &mut solver).expect("rig");
         let rig = region.rig.as_ref().expect("rig");
         let mut run = Run::new(&p, rig);
         let mut seq = 0u32;

@@ -26,6 +26,7 @@ use embedded_io::{Read, ReadReady, Write};
 use marionette_core::frame::{Cycles, Performer, Region, Update};
 use marionette_core::output::ServoOutput;
 use marionette_core::output::maestro::{Command, Maestro};
+use marionette_core::solve::SolverState;
 use marionette_core::wire::{
     self, Ack, CommandKind, Incoming, MAX_FRAME, Message, PROTOCOL_VERSION, Receiver, Status,
     StatusReason,
@@ -35,9 +36,13 @@ use marionette_core::wire::{
 const CHUNK: usize = 64;
 
 /// The most segments of a rig this firmware drives: the capacity of its
-/// [`Region`] and [`Performer`]. Every shipped rig fits (`humanoid16`: 13,
-/// `cmu31`: 31).
-pub const SEGMENTS: usize = 32;
+/// [`Region`], [`Performer`] and solver state, which are most of its RAM
+/// (about 600 bytes per segment). The shipped puppet, `humanoid16`, has 13
+/// segments; 24 leaves room for a fuller figure within the 32 KB RAM budget
+/// (the largest Maestro drives 24 servos). The other shipped rig, `cmu31`
+/// (31 segments), is a reference skeleton for building tables, with no
+/// servos, and is not driven by a board.
+pub const SEGMENTS: usize = 24;
 
 /// The live loop at the firmware's capacity.
 pub type BoardPerformer<'r, 'a> = Performer<'r, 'a, SEGMENTS>;
@@ -63,8 +68,10 @@ pub fn run<B: Board>(board: &mut B) -> Outcome {
 /// so that the performer's stack frame is not below the region parse's.
 #[inline(never)]
 fn drive<B: Board>(board: &mut B, region: &Region<'_, SEGMENTS>) -> Outcome {
-    // Used in place: the performer is too big to move around on the stack.
-    let mut performer = Performer::new(region);
+    // The solver's state is most of the loop's memory: made here, in place,
+    // and lent to the performer (which stays small enough to move).
+    let mut solver = SolverState::new();
+    let mut performer = Performer::new(region, &mut solver);
     match performer.as_mut() {
         Some(performer) => {
             if let Some(rig) = &region.rig

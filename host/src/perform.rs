@@ -20,6 +20,7 @@ use crate::qemu::{self, Config, QemuError};
 use crate::rigfile::RigFile;
 use marionette_core::frame::{Cause, NoCycles, Performer, Region, Update};
 use marionette_core::servo::maestro;
+use marionette_core::solve::SolverState;
 use marionette_core::table::{Interp, Kind, Wrap};
 use marionette_core::wire::{
     self, Command, CommandKind, Hello, List, MAX_FRAME, MAX_SENSORS, Message, PROTOCOL_VERSION,
@@ -268,7 +269,8 @@ pub fn simulate_with(
     observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
 ) -> Result<Run, PerformError> {
     let region = Region::parse(region_bytes);
-    let mut performer = Performer::new(&region).ok_or(PerformError::NoRig)?;
+    let mut solver = SolverState::new();
+    let mut performer = Performer::new(&region, &mut solver).ok_or(PerformError::NoRig)?;
     let period = performer.frame_period_us().max(1);
     let mut run = Run::default();
     let mut clock = session.first().map_or(0, |s| s.time_us);

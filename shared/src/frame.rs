@@ -25,7 +25,9 @@
 //!   correction (solved minus synthesized) is added back, so the solver
 //!   starts where it left those goals a frame ago, moved by how the
 //!   synthesis moved; then the goals are solved ([`Solver::DEFAULT`]). The
-//!   solver never leaves a joint limit.
+//!   solver keeps its [`SolverState`] from frame to frame (the reach tree
+//!   and joint layout are rebuilt only when the active goals change) and
+//!   never leaves a joint limit.
 //! - **servo**: each servo follows one joint angle through its calibration
 //!   and a [`Slew`] limiter, so no pulse leaves its calibrated range or moves
 //!   faster than the servo's speed and acceleration limits.
@@ -49,18 +51,21 @@
 //!
 //! ## Capacity
 //!
-//! [`Region`] and [`Performer`] hold the rig, poses, joint angles and the
-//! solver's state for at most `N` segments, a const parameter (default
+//! [`Region`], [`Performer`] and the [`SolverState`] the caller lends the
+//! performer hold the rig, poses, joint angles and the solver's working
+//! state for at most `N` segments, a const parameter (default
 //! [`MAX_SEGMENTS`], the rig format's limit). A firmware picks the smallest
-//! that fits its rigs, e.g. 32 for the shipped `humanoid16` (13 segments)
-//! and `cmu31` (31): RAM and per-frame copies scale with it. It parses its
+//! that fits its rigs (the firmware's 24 holds the shipped puppet
+//! `humanoid16`, 13 segments, with room): RAM and per-frame copies scale
+//! with it. It parses its
 //! region in place (a rig is kilobytes, and every move of one is a copy on
 //! the stack) and runs the loop on it:
 //!
 //! ```text
-//! let mut region = Region::<32>::EMPTY;
+//! let mut region = Region::<24>::EMPTY;
 //! region.parse_into(flash_bytes);
-//! let mut performer = Performer::new(&region); // Option<Performer<'_, '_, 32>>
+//! let mut solver = SolverState::<24>::new(); // most of the loop's memory
+//! let mut performer = Performer::new(&region, &mut solver); // Option<Performer<'_, '_, 24>>
 //! ```
 //!
 //! A rig with more segments than `N` is refused as
@@ -72,7 +77,7 @@ use crate::grid::{Adjust, Grid, Query};
 use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
 use crate::rig::{MAX_PARAMS, Rig, RigError};
 use crate::servo::{Slew, quarter_us};
-use crate::solve::{self, Solver};
+use crate::solve::{self, Solver, SolverState};
 use crate::table::{Kind, Table, TableError};
 use crate::wire::{
     Ack, CommandKind, ErrorCounters, Incoming, List, MAX_GOALS, MAX_SENSORS, MAX_SERVOS, Message,
@@ -378,6 +383,9 @@ pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
     synth: Pose<N>,
     pose: Pose<N>,
     local: LocalPose<N>,
+    /// What the solver built for the last frame's goals (reach tree, joint
+    /// layout, rotations), reused while the active goals stay the same.
+    solver: &'r mut SolverState<N>,
     slews: [Option<Slew>; MAX_SERVOS],
     /// The step length the slews' limits are set for, seconds.
     step_dt: Option<f32>,
@@ -392,13 +400,20 @@ pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
 }
 
 impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
-    /// A loop for `region`'s rig (disarmed; servos assumed at rest). Returns
-    /// `None` when the region holds no valid rig: there is nothing to drive.
-    /// Never inlined, like [`Region::parse_sized`].
+    /// A loop for `region`'s rig (disarmed; servos assumed at rest), solving
+    /// with `solver`'s storage. Returns `None` when the region holds no valid
+    /// rig: there is nothing to drive.
+    ///
+    /// The solver's state is most of a performer's memory (about 12 kB at
+    /// 24 segments), so the caller provides it, like a socket buffer in
+    /// smoltcp: where it lives is the caller's choice, and the performer,
+    /// returned by value, stays small enough to move. Never inlined, like
+    /// [`Region::parse_sized`].
     #[must_use]
     #[inline(never)]
-    pub fn new(region: &'r Region<'a, N>) -> Option<Self> {
+    pub fn new(region: &'r Region<'a, N>, solver: &'r mut SolverState<N>) -> Option<Self> {
         let rig = region.rig.as_ref()?;
+        solver.reset();
         let grid = region.table.as_ref().and_then(|t| t.grid().ok());
         let reason = match (region.reason, &grid) {
             (StatusReason::Ok, None) => StatusReason::Unsupported,
@@ -443,6 +458,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             synth: Pose::default(),
             pose: *rig.rest_pose(),
             local: LocalPose::default(),
+            solver,
             slews,
             step_dt: None,
             targets,
@@ -784,12 +800,13 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     fn solve(&mut self) -> bool {
         let body: Body<'_> = self.rig.body();
         self.warm.start(&body, &self.goals, &mut self.angles);
-        match solve::solve(
+        match solve::solve_with(
             &SOLVER,
             &body,
             &self.goals,
             &mut self.angles,
             &mut self.pose,
+            self.solver,
         ) {
             Ok(report) => {
                 for (r, x) in self.residuals.iter_mut().zip(report.residuals.iter()) {

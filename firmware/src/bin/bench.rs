@@ -322,7 +322,8 @@ fn tracker_frame(i: u32) -> Message {
 /// firmware's capacity.
 fn frame_rows(counter: &mut Counter) {
     let region = Region::<{ app::SEGMENTS }>::parse_sized(region::tables());
-    let Some(mut performer) = BoardPerformer::new(&region) else {
+    let mut solver = SolverState::new();
+    let Some(mut performer) = BoardPerformer::new(&region, &mut solver) else {
         Line::new().str("frame: no rig in the table region").print();
         return;
     };

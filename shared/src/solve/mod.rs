@@ -326,18 +326,14 @@ pub fn solve_with<const N: usize, const G: usize>(
         *tree = ReachTree::EMPTY;
         tree.fill(body, goals.as_slice())?;
     }
-    let (iterations, converged) = match solver.method {
-        Method::TreeDls if !tree.is_empty() => {
-            tree::solve(solver, tree, &mut state.lm, laid_out, &mut work)?
-        }
-        _ => {
-            work.forward()?;
-            if tree.is_empty() {
-                (0, true)
-            } else {
-                balance::solve(solver, tree, &mut work)?
-            }
-        }
+    let (iterations, converged) = if tree.is_empty() {
+        work.forward()?;
+        (0, true)
+    } else if solver.method == Method::TreeDls {
+        tree::solve(solver, tree, &mut state.lm, laid_out, &mut work)?
+    } else {
+        work.forward()?;
+        balance::solve(solver, tree, &mut work)?
     };
     state.layout = layout;
     let mut report = Report {
