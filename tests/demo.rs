@@ -8,7 +8,8 @@
 //! (the servo calibration's linear map), not by the code under test. And
 //! the bundled recording is exactly what its `SOURCE.txt` command makes.
 
-use marionette_core::frame::Region;
+use marionette_core::frame::{NoCycles, Performer, Region};
+use marionette_core::solve::SolverState;
 use marionette_core::table::Kind;
 use marionette_core::wire::StatusReason;
 use marionette_host::cmd::demo;
@@ -165,4 +166,59 @@ fn the_bundled_recording_is_what_marionette_record_makes() {
         made == bundled,
         "the bundled recording differs from a fresh one"
     );
+}
+/// The firmware's capacity (`app::SEGMENTS` in firmware/src/app.rs).
+const FIRMWARE_SEGMENTS: usize = 24;
+
+/// A performer's capacity changes its memory, never its numbers: on the
+/// demo's session, the firmware's capacity and the host's default give the
+/// same pose and servo targets after every message (the board-vs-native
+/// comparisons rest on it), and the same easing to rest.
+#[test]
+fn the_capacity_never_changes_the_output() {
+    let root = repo();
+    let built = demo::build_table(&root.join("data/builds/reach_humanoid16.toml")).unwrap();
+    let inputs = demo::inputs(
+        &root.join("rigs/humanoid16.toml"),
+        &built.blob,
+        &root.join("data/recordings/reach_hdm05_007.csv"),
+    )
+    .unwrap();
+    let host = Region::parse(&inputs.region);
+    let board = Region::<FIRMWARE_SEGMENTS>::parse_sized(&inputs.region);
+    let (mut s1, mut s2) = (SolverState::new(), SolverState::new());
+    let mut a = Performer::new(&host, &mut s1).unwrap();
+    let mut b = Performer::new(&board, &mut s2).unwrap();
+    let (mut time, mut armed) = (0, false);
+    for (k, sent) in inputs.session.iter().enumerate() {
+        let (mut ia, mut ib) = (sent.bytes.as_slice(), sent.bytes.as_slice());
+        while !ia.is_empty() {
+            a.receive(&mut ia, sent.time_us, &mut NoCycles);
+        }
+        while !ib.is_empty() {
+            b.receive(&mut ib, sent.time_us, &mut NoCycles);
+        }
+        let (pa, pb) = (a.pose(), b.pose());
+        assert_eq!(pa.len(), pb.len());
+        for s in 0..pa.len() {
+            assert_eq!(pa.positions[s], pb.positions[s], "message {k}, segment {s}");
+            assert_eq!(pa.rotations[s], pb.rotations[s], "message {k}, segment {s}");
+        }
+        assert_eq!(a.targets(), b.targets(), "message {k}");
+        time = sent.time_us;
+        armed |= a.armed();
+    }
+    assert!(armed, "the session arms the board");
+    // The link goes quiet: both ease to rest by the same steps.
+    let period = a.frame_period_us().max(1);
+    for step in 0..10_000 {
+        if a.resting() && b.resting() {
+            return;
+        }
+        time = time.wrapping_add(period);
+        a.tick(time);
+        b.tick(time);
+        assert_eq!(a.targets(), b.targets(), "easing step {step}");
+    }
+    panic!("never came to rest");
 }
