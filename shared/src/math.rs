@@ -29,7 +29,7 @@
 //! | [`abs`] | clear the sign bit | all | exact |
 //! | [`rsqrt`] | bit-trick seed (`0x5f37_5a86`) + 3 Newton steps, subnormals pre-scaled by 2^24 | `x > 0` | 1.9e-7 relative (≤ 2 ulp) |
 //! | [`sqrt`] | `x · rsqrt(x)` then an exact `f64` midpoint test picks the correctly rounded neighbour | `x ≥ 0` | correctly rounded (≤ 0.5 ulp), identical to the M4F `VSQRT` |
-//! | [`sin`], [`cos`], [`sin_cos`] | Cody–Waite reduction by π/2 with a 3-part constant (8 + 8 + 24 bits), minimax odd/even polynomials on [−π/4, π/4] (degree 7 / 8, coefficients fitted for this crate) | accurate for `|x| ≤ 1e5` | 8.7e-8 absolute (≈ 1.5 ulp, worst near `r = ±π/4`) |
+//! | [`sin`], [`cos`], [`sin_cos`] | Cody–Waite reduction by π/2 with a 3-part constant (8 + 8 + 24 bits; skipped below π/4, where it changes nothing), minimax odd/even polynomials on [−π/4, π/4] (degree 7 / 8, coefficients fitted for this crate) | accurate for `|x| ≤ 1e5` | 8.7e-8 absolute (≈ 1.5 ulp, worst near `r = ±π/4`) |
 //! | [`asin`], [`acos`] | minimax `x + x³P(x²)` (degree 13) on `|x| ≤ ½`; `asin x = π/2 − 2·asin √((1−x)/2)` above | `[−1, 1]` (clamped) | asin 1.6e-7, acos 3.1e-7 absolute (≈ 1.3 ulp) |
 //! | [`atan`], [`atan2`] | octant reduction, `atan t = π/4 + atan((t−1)/(t+1))` above tan(π/8), minimax degree 13 | all | atan 1.7e-7, atan2 2.9e-7 absolute (≈ 1.2 ulp of π) |
 //! | [`slerp`], [`SlerpWeight`] | fitted polynomial slerp weights (below) + one Newton normalization step | unit inputs, `t ∈ [0, 1]` | 6.7e-6 rad rotation angle (fit: 6.5e-6), `|r| − 1` within 1.5e-7 |
