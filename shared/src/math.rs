@@ -28,7 +28,7 @@
 //! | [`abs`] | clear the sign bit | all | exact |
 //! | [`rsqrt`] | bit-trick seed (`0x5f37_5a86`) + 3 Newton steps, subnormals pre-scaled by 2^24 | `x > 0` | 1.9e-7 relative (≤ 2 ulp) |
 //! | [`sqrt`] | `x · rsqrt(x)` then an exact integer midpoint test picks the correctly rounded neighbour | `x ≥ 0` | correctly rounded (≤ 0.5 ulp), identical to the M4F `VSQRT` |
-//! | [`sin`], [`cos`], [`sin_cos`] | Cody–Waite reduction by π/2 with a 3-part constant (8 + 8 + 24 bits), minimax odd/even polynomials on [−π/4, π/4] (degree 7 / 8, coefficients fitted for this crate) | accurate for `|x| ≤ 1e5` | 8.7e-8 absolute (≈ 1.5 ulp, worst near `r = ±π/4`) |
+//! | [`sin`], [`cos`], [`sin_cos`] | Cody–Waite reduction by π/2 with a 3-part constant (8 + 8 + 24 bits; skipped below π/4, where it changes nothing), minimax odd/even polynomials on [−π/4, π/4] (degree 7 / 8, coefficients fitted for this crate) | accurate for `|x| ≤ 1e5` | 8.7e-8 absolute (≈ 1.5 ulp, worst near `r = ±π/4`) |
 //! | [`asin`], [`acos`] | minimax `x + x³P(x²)` (degree 13) on `|x| ≤ ½`; `asin x = π/2 − 2·asin √((1−x)/2)` above | `[−1, 1]` (clamped) | asin 1.6e-7, acos 3.1e-7 absolute (≈ 1.3 ulp) |
 //! | [`atan`], [`atan2`] | octant reduction, `atan t = π/4 + atan((t−1)/(t+1))` above tan(π/8), minimax degree 13 | all | atan 1.7e-7, atan2 2.9e-7 absolute (≈ 1.2 ulp of π) |
 //! | [`slerp`], [`SlerpWeight`] | fitted polynomial slerp weights (below) + one Newton normalization step | unit inputs, `t ∈ [0, 1]` | 6.7e-6 rad rotation angle (fit: 6.5e-6), `|r| − 1` within 1.5e-7 |
@@ -258,6 +258,10 @@ const C2: f32 = 0.041_666_650_680_999_03;
 const C3: f32 = -0.001_388_759_056_807_339_7;
 const C4: f32 = 2.446_393_330_502_231e-5;
 
+/// The largest `f32` that [`reduce_pio2`] leaves in quadrant 0 (two below
+/// [`FRAC_PI_4`]: `x·2/π + ½` rounds up to 1 from the next one on).
+const SIN_COS_DIRECT: f32 = 0.785_398_07;
+
 /// Reduces `x` to `r ∈ [−π/4, π/4]` and the quadrant `k mod 4`.
 #[inline]
 fn reduce_pio2(x: f32) -> (f32, i32) {
@@ -282,9 +286,16 @@ fn cos_poly(r: f32) -> f32 {
 /// Sine and cosine of `x` (radians) together. Accurate (8.7e-8 absolute) for
 /// `|x| ≤ 1e5`; beyond that the range reduction loses accuracy (still finite,
 /// never panics). NaN or infinite input gives NaN.
+///
+/// Up to [`SIN_COS_DIRECT`] in magnitude (a joint's half angle, mostly) the
+/// reduction is skipped: it would give `r = x` and quadrant 0 there, so the
+/// result is the same bit for bit (`sin_cos_fast_path_is_the_reduced_path`).
 #[inline]
 #[must_use]
 pub fn sin_cos(x: f32) -> (f32, f32) {
+    if abs(x) <= SIN_COS_DIRECT {
+        return (sin_poly(x), cos_poly(x));
+    }
     if !(abs(x) < f32::INFINITY) {
         return (f32::NAN, f32::NAN);
     }
@@ -1099,6 +1110,51 @@ mod tests {
         assert_eq!(sqrt(-0.0).to_bits(), (-0.0f32).to_bits());
         assert_eq!(sqrt(f32::INFINITY), f32::INFINITY);
         assert!(sqrt(-1.0).is_nan() && sqrt(f32::NAN).is_nan());
+    }
+
+    /// The reduced path of [`sin_cos`], without the fast path.
+    fn sin_cos_reduced(x: f32) -> (f32, f32) {
+        let (r, q) = reduce_pio2(x);
+        let (s, c) = (sin_poly(r), cos_poly(r));
+        match q {
+            0 => (s, c),
+            1 => (c, -s),
+            2 => (-s, -c),
+            _ => (-c, s),
+        }
+    }
+
+    /// The fast path of [`sin_cos`] (`|x| ≤` [`SIN_COS_DIRECT`]) gives the
+    /// reduced path's bits. The reduction gives quadrant 0 and `r = x`
+    /// wherever `x·2/π + ½` rounds below 1 (`x − 0·P` is `x`, also for −0),
+    /// and both roundings are monotone in `x`: the floats next to the bound
+    /// are checked exhaustively, the rest densely.
+    #[test]
+    fn sin_cos_fast_path_is_the_reduced_path() {
+        let same = |x: f32| {
+            let (a, b) = (sin_cos(x), sin_cos_reduced(x));
+            assert_eq!(
+                (a.0.to_bits(), a.1.to_bits()),
+                (b.0.to_bits(), b.1.to_bits()),
+                "sin_cos({x:e})"
+            );
+        };
+        assert_eq!(SIN_COS_DIRECT.to_bits(), FRAC_PI_4.to_bits() - 2);
+        assert_eq!(reduce_pio2(SIN_COS_DIRECT), (SIN_COS_DIRECT, 0));
+        assert_eq!(reduce_pio2(SIN_COS_DIRECT.next_up()).1, 1);
+        let edge = FRAC_PI_4.to_bits();
+        for bits in edge - (1 << 20)..edge + (1 << 20) {
+            same(f32::from_bits(bits));
+            same(-f32::from_bits(bits));
+        }
+        for bits in (0..edge).step_by(97) {
+            same(f32::from_bits(bits));
+            same(-f32::from_bits(bits));
+        }
+        for x in [0.0, -0.0, f32::MIN_POSITIVE, 1e-45, SIN_COS_DIRECT] {
+            same(x);
+            same(-x);
+        }
     }
 
     #[test]

@@ -47,18 +47,21 @@
 //! 6.7 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
 //! meets all goals on 30 of 32 problems (chain DLS and CCD 25). On the
 //! emulated Cortex-M4F (instruction counts, not cycles), tree DLS takes about
-//! 117 k instructions cold ([`solve`], 3 iterations) and 71 k warm (goals
+//! 112 k instructions cold ([`solve`], 3 iterations) and 68 k warm (goals
 //! moved ≤ 2 cm, [`solve_with`] with the [`SolverState`] of the previous
-//! frame, 2 iterations). One iteration is about 27 k: the columns and their
-//! sums 8.3 k, forward kinematics of the 20 segments the goals hang from 6 k,
-//! the step and its limits 4.5 k (two rounds when a joint limit clamps), the
-//! 3×3 blocks and the damping 4.8 k, the factorisation 2.3 k, applying the
-//! step 1 k. The iteration count is set by the problem's curvature, not the
-//! damping: a step from goals 1.5 cm away leaves about 2 mm (the limbs turn),
-//! the next one 0.02 mm. A fresh working state costs about 14 k before the
-//! first iteration (clearing 13 kB, the reach tree, the joint layout) and the
-//! first forward kinematics 6 k; a kept state skips the first three while the
-//! goals stay on the same segments, and a start at the last solution skips
+//! frame, 2 iterations). One iteration is about 26 k: the columns and their
+//! sums 8.3 k, forward kinematics of the 20 segments the goals hang from 5 k,
+//! the step and its limits 4.2 k (two rounds when a joint limit clamps), the
+//! 3×3 blocks and the damping 5.2 k, the factorisation 2.2 k, applying the
+//! step 1.8 k. The iteration count is set by the problem's curvature, not the
+//! damping: from goals up to 10 cm away the steps leave 12 mm, 0.8 mm and
+//! 0.01 mm (ten times less damping: 11 mm, 0.6 mm, 0.01 mm; a chord step,
+//! the last linearisation reused for the new residuals, leaves far more
+//! than a new one: 12 → 3.3 mm, 0.8 → 0.14 mm); from goals 1.5 cm away
+//! 2 mm, then 0.02 mm. A fresh working state costs about 14 k before the
+//! first iteration (clearing 13.5 kB, the reach tree, the joint layout) and
+//! the first forward kinematics 5 k; a kept state skips the first three
+//! while the goals stay on the same segments, and a start at the last solution skips
 //! the sines and cosines of the first forward kinematics (each joint's
 //! rotation is kept with its angles), leaving about 2.5 k of it. The final
 //! pose and the report cost about 2.5 k. Fewer moving DOFs or goals cost
