@@ -193,6 +193,41 @@ fn status_exact() {
     );
 }
 
+/// Every `StatusReason` encodes as the tag the spec gives it (the
+/// payload's fifth byte, after the message tag, version, armed, table_ok).
+#[test]
+fn status_reason_tags_exact() {
+    let tags = [
+        (StatusReason::Ok, 0),
+        (StatusReason::NoTable, 1),
+        (StatusReason::BadMagic, 2),
+        (StatusReason::BadVersion, 3),
+        (StatusReason::BadCrc, 4),
+        (StatusReason::BadBounds, 5),
+        (StatusReason::ProtocolMismatch, 6),
+        (StatusReason::NoRig, 7),
+        (StatusReason::RigMismatch, 8),
+        (StatusReason::Unsupported, 9),
+        (StatusReason::RigTooLarge, 10),
+    ];
+    for (reason, tag) in tags {
+        let msg = Message::Status(Status {
+            protocol_version: 1,
+            armed: false,
+            table_ok: false,
+            reason,
+            errors: ErrorCounters::new(),
+            frames_ok: 0,
+        });
+        let frame = encode(&msg);
+        let mut payload = [0u8; MAX_FRAME];
+        let n = cobs::decode(&frame[..frame.len() - 1], &mut payload).unwrap();
+        assert_eq!(&payload[..5], &[0x04, 0x01, 0x00, 0x00, tag], "{reason:?}");
+        assert!(n > 5);
+        check_exact(msg, &frame);
+    }
+}
+
 #[test]
 fn telemetry_exact() {
     // 05 (Telemetry) 00 (seq) 01 F0 2E (1 servo: 6000 = 0x1770 → 0xF0, 0x2E)

@@ -57,9 +57,8 @@
 //! [`MAX_SEGMENTS`], the rig format's limit). A firmware picks the smallest
 //! that fits its rigs (the firmware's 24 holds the shipped puppet
 //! `humanoid16`, 13 segments, with room): RAM and per-frame copies scale
-//! with it. It parses its
-//! region in place (a rig is kilobytes, and every move of one is a copy on
-//! the stack) and runs the loop on it:
+//! with it. It parses its region in place (a rig is kilobytes, and every
+//! move of one is a copy on the stack) and runs the loop on it:
 //!
 //! ```text
 //! let mut region = Region::<24>::EMPTY;
@@ -408,7 +407,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     /// 24 segments), so the caller provides it, like a socket buffer in
     /// smoltcp: where it lives is the caller's choice, and the performer,
     /// returned by value, stays small enough to move. Never inlined, like
-    /// [`Region::parse_sized`].
+    /// [`Region::parse_into`].
     #[must_use]
     #[inline(never)]
     pub fn new(region: &'r Region<'a, N>, solver: &'r mut SolverState<N>) -> Option<Self> {

@@ -92,6 +92,37 @@ pub const FRAC_PI_2: f32 = core::f32::consts::FRAC_PI_2;
 /// π/4 as the nearest `f32`.
 pub const FRAC_PI_4: f32 = core::f32::consts::FRAC_PI_4;
 
+/// The larger of `a` and `b` by one comparison: `a` if `a > b`, else `b`
+/// (so a NaN `a` gives `b`). No library call, unlike `f32::max` on the
+/// Cortex-M4F, which has no `vmaxnm`.
+#[inline(always)]
+#[must_use]
+pub fn max(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// The smaller of `a` and `b` by one comparison: `a` if `a < b`, else `b`
+/// (see [`max`]).
+#[inline(always)]
+#[must_use]
+pub fn min(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// `x` clamped into `[lo, hi]` by comparisons (NaN becomes `lo`; no
+/// assertion that `lo ≤ hi`, unlike `f32::clamp`, which is a panic path).
+#[inline]
+#[must_use]
+pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
+    if x >= hi {
+        hi
+    } else if x >= lo {
+        x
+    } else {
+        lo
+    }
+}
+
 /// Absolute value: clears the sign bit (exact, also for NaN and −0).
 #[inline]
 #[must_use]
@@ -1048,6 +1079,27 @@ mod tests {
         (1u32..0x7f80_0000)
             .step_by(stride as usize)
             .map(f32::from_bits)
+    }
+
+    #[test]
+    fn max_min_clamp_compare_like_std() {
+        let xs = [-3.5f32, -0.0, 0.0, 1e-30, 2.0, 7.25, f32::INFINITY];
+        for &a in &xs {
+            for &b in &xs {
+                if a != b {
+                    assert_eq!(max(a, b), a.max(b), "{a} {b}");
+                    assert_eq!(min(a, b), a.min(b), "{a} {b}");
+                }
+                let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
+                for &x in &xs {
+                    assert_eq!(clamp(x, lo, hi), x.clamp(lo, hi), "{x} {lo} {hi}");
+                }
+            }
+        }
+        // NaN: `max`/`min` take the other value, `clamp` the lower bound.
+        assert_eq!(max(f32::NAN, 1.0), 1.0);
+        assert_eq!(min(f32::NAN, 1.0), 1.0);
+        assert_eq!(clamp(f32::NAN, -1.0, 1.0), -1.0);
     }
 
     #[test]

@@ -28,6 +28,8 @@
 //! bytes: `0x84, channel, target & 0x7F, (target >> 7) & 0x7F`, where the target
 //! is in quarter-microseconds (1500 µs is 6000). See [`maestro`].
 
+use crate::math;
+
 /// The calibration of one servo channel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Calibration {
@@ -72,35 +74,21 @@ impl Calibration {
         let u = u.clamp(0.0, 1.0);
         let u = if self.reversed { 1.0 - u } else { u };
         let pulse = self.pulse_min_us + u * (self.pulse_max_us - self.pulse_min_us) + self.trim_us;
-        // max/min, not clamp: clamp asserts its bounds (a panic path).
-        min(max(pulse, self.pulse_low()), self.pulse_high())
+        // Not `f32::clamp`: it asserts its bounds (a panic path).
+        math::clamp(pulse, self.pulse_low(), self.pulse_high())
     }
 
     /// The lowest pulse this channel may ever receive, µs.
     #[must_use]
     pub fn pulse_low(&self) -> f32 {
-        min(self.pulse_min_us, self.pulse_max_us)
+        math::min(self.pulse_min_us, self.pulse_max_us)
     }
 
     /// The highest pulse this channel may ever receive, µs.
     #[must_use]
     pub fn pulse_high(&self) -> f32 {
-        max(self.pulse_min_us, self.pulse_max_us)
+        math::max(self.pulse_min_us, self.pulse_max_us)
     }
-}
-
-/// `a.max(b)` by a comparison: the same for numbers and for a NaN `a` (the
-/// result is `b`), without `f32::max`'s library call on the Cortex-M4F
-/// (which has no `vmaxnm`).
-#[inline(always)]
-fn max(a: f32, b: f32) -> f32 {
-    if a > b { a } else { b }
-}
-
-/// `a.min(b)` by a comparison (see [`max`]).
-#[inline(always)]
-fn min(a: f32, b: f32) -> f32 {
-    if a < b { a } else { b }
 }
 
 /// Converts a pulse width in µs to the Maestro's quarter-microseconds, rounding
@@ -262,7 +250,7 @@ fn stopping_speed(dist: u32, accel: i32) -> i32 {
     // the correctly rounded root: x·(1/√x) with the fast reciprocal root.
     let x = 2.0 * dist as f32 * a as f32;
     if x >= 1.0 {
-        let seed = x * crate::math::rsqrt(x);
+        let seed = x * math::rsqrt(x);
         if seed.is_finite() && seed > 0.0 {
             v = seed as u32;
         }

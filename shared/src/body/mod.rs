@@ -152,13 +152,7 @@ impl Dof {
     #[inline]
     #[must_use]
     pub fn clamp(&self, value: f32) -> f32 {
-        if value >= self.max {
-            self.max
-        } else if value >= self.min {
-            value
-        } else {
-            self.min
-        }
+        math::clamp(value, self.min, self.max)
     }
 
     /// How far `value` lies outside the limits (0 inside).

@@ -62,9 +62,10 @@
 //!
 //! A [`Rig`] holds its segment arrays and rest pose for at most `N` segments
 //! (a const parameter, default [`MAX_SEGMENTS`], the format's limit). A board
-//! with little RAM instantiates a smaller one, e.g. `Rig<'_, 32>` (every
-//! shipped rig fits): [`Rig::parse_sized`] and [`Rig::from_desc_sized`]
-//! refuse a rig with more segments with [`RigError::Capacity`].
+//! with little RAM instantiates a smaller one, e.g. `Rig<'_, 24>` (the
+//! firmware's: the shipped puppet fits): [`Rig::parse_sized`] and
+//! [`Rig::from_desc_sized`] refuse a rig with more segments with
+//! [`RigError::Capacity`].
 
 mod desc;
 pub mod sensor;
@@ -193,6 +194,16 @@ pub enum RigError {
     },
 }
 
+impl RigError {
+    /// [`RigError::Capacity`] for `segments` against a capacity.
+    fn over_capacity(segments: impl TryInto<u8>, capacity: usize) -> Self {
+        RigError::Capacity {
+            segments: segments.try_into().unwrap_or(u8::MAX),
+            capacity: u8::try_from(capacity).unwrap_or(u8::MAX),
+        }
+    }
+}
+
 impl From<BodyError> for RigError {
     fn from(e: BodyError) -> Self {
         RigError::Body(e)
@@ -288,10 +299,7 @@ impl<'a, const N: usize> RigDesc<'a, N> {
                 Ok(((.., segments), _))
                     if usize::try_from(segments).is_ok_and(|s| N < s && s <= MAX_SEGMENTS) =>
                 {
-                    Err(RigError::Capacity {
-                        segments: u8::try_from(segments).unwrap_or(u8::MAX),
-                        capacity: u8::try_from(N).unwrap_or(u8::MAX),
-                    })
+                    Err(RigError::over_capacity(segments, N))
                 }
                 _ => Err(RigError::Decode),
             },
@@ -464,10 +472,7 @@ impl<'a, const N: usize> Rig<'a, N> {
         *slot = None;
         desc.validate()?;
         if desc.segments.len() > N {
-            return Err(RigError::Capacity {
-                segments: u8::try_from(desc.segments.len()).unwrap_or(u8::MAX),
-                capacity: u8::try_from(N).unwrap_or(u8::MAX),
-            });
+            return Err(RigError::over_capacity(desc.segments.len(), N));
         }
         let rig = slot.insert(Rig {
             name: desc.name,

@@ -17,8 +17,7 @@
 //! computes it again only when they change (bit for bit the same numbers).
 
 use super::reach::bit;
-use super::slots::{Kind, MAX_GOALS, Slot, Slots, larger};
-use super::tree::clamp;
+use super::slots::{Kind, MAX_GOALS, Slot, Slots};
 use super::{ReachTree, RootMode, SolveError, Solver, Work};
 use crate::body::{Axis, Segment};
 use crate::goal::Frame;
@@ -328,7 +327,7 @@ impl<const N: usize> Joints<N> {
     /// [`Joints::back`].
     pub fn apply(&mut self, work: &mut Work<'_, '_, N>, max_step: f32, keep: bool) {
         let dofs = self.dofs.iter().take(self.count);
-        let biggest = dofs.fold(0.0f32, |m, d| larger(m, d.delta.abs().max_element()));
+        let biggest = dofs.fold(0.0f32, |m, d| math::max(d.delta.abs().max_element(), m));
         let scale = if biggest > max_step {
             max_step / biggest
         } else {
@@ -358,7 +357,7 @@ impl<const N: usize> Joints<N> {
                     .zip(limits)
                     .take(usize::from(g.count))
                 {
-                    *x = clamp(*x + d * scale, min, max);
+                    *x = math::clamp(*x + d * scale, min, max);
                 }
             }
         }

@@ -125,7 +125,7 @@ impl Slots {
             let goal = work.goals.get(usize::from(slot.goal)).ok_or(bad)?;
             slot.refresh(goal, work).ok_or(bad)?;
             let r2 = slot.r.length_squared();
-            worst = larger(worst, r2);
+            worst = math::max(r2, worst);
             error += slot.sw * slot.sw * r2;
         }
         self.error = error;
@@ -173,7 +173,7 @@ impl Slots {
     pub fn moved(&self, before: &Rhs) -> f32 {
         self.iter()
             .zip(before)
-            .fold(0.0, |m, (a, b)| larger(m, (a.r - *b).length_squared()))
+            .fold(0.0, |m, (a, b)| math::max((a.r - *b).length_squared(), m))
     }
 }
 
@@ -218,10 +218,4 @@ impl Slot {
         }
         Some(())
     }
-}
-
-/// `b` if it is larger, else `a` (no libm call, unlike `f32::max`).
-#[inline]
-pub(super) fn larger(a: f32, b: f32) -> f32 {
-    if b > a { b } else { a }
 }

@@ -29,9 +29,10 @@
 //! joints' ranges, and the lowest error wins.
 
 use super::joints::Joints;
-use super::slots::{Slots, larger};
+use super::slots::Slots;
 use super::system::System;
 use super::{ReachTree, SolveError, Solver, Work};
+use crate::math;
 
 pub use super::slots::MAX_GOALS;
 
@@ -76,7 +77,7 @@ pub(super) fn solve<const N: usize>(
         .goals
         .iter()
         .filter(|g| g.is_active())
-        .fold(0.0f32, |m, g| if g.weight > m { g.weight } else { m });
+        .fold(0.0f32, |m, g| math::max(g.weight, m));
     if wmax <= 0.0 {
         work.forward()?;
         return Ok((0, true));
@@ -113,7 +114,7 @@ impl<const N: usize> Lm<N> {
     ) -> Result<(u32, bool), SolveError> {
         self.refresh(work)?;
         let tol2 = solver.tolerance * solver.tolerance;
-        let mut lambda = larger(solver.damping, MIN_DAMPING);
+        let mut lambda = math::max(MIN_DAMPING, solver.damping);
         let mut fresh = true;
         let mut iterations = 0u32;
         while iterations < u32::from(solver.max_iterations) {
@@ -137,7 +138,7 @@ impl<const N: usize> Lm<N> {
             if self.slots.error < error {
                 self.slots.mark(&before);
                 fresh = true;
-                lambda = larger(lambda / 3.0, MIN_DAMPING);
+                lambda = math::max(MIN_DAMPING, lambda / 3.0);
                 let gained = error - self.slots.error;
                 if self.slots.moved(&before) <= tol2 || gained <= self.slots.weight * tol2 {
                     return Ok((iterations, true));
@@ -216,19 +217,7 @@ fn spread<const N: usize>(work: &mut Work<'_, '_, N>, joints: &Joints<N>, k: u8)
             } else {
                 min + (max - min) * (0.25 + 0.5 * u)
             };
-            *v = clamp(x, min, max);
+            *v = math::clamp(x, min, max);
         }
-    }
-}
-
-/// `x` clamped into `[min, max]` (NaN becomes `min`), as [`crate::body::Dof::clamp`].
-#[inline]
-pub(super) fn clamp(x: f32, min: f32, max: f32) -> f32 {
-    if x >= max {
-        max
-    } else if x >= min {
-        x
-    } else {
-        min
     }
 }

@@ -65,7 +65,8 @@
 //!   5 `Boresight { sensor: u8 }`, 6 `RequestStatus`.
 //! - [`StatusReason`]: 0 `Ok`, 1 `NoTable`, 2 `BadMagic`, 3 `BadVersion`
 //!   (table format), 4 `BadCrc`, 5 `BadBounds`, 6 `ProtocolMismatch`, 7 `NoRig`,
-//!   8 `RigMismatch`, 9 `Unsupported`.
+//!   8 `RigMismatch`, 9 `Unsupported`, 10 `RigTooLarge` (a valid rig with
+//!   more segments than the firmware holds).
 //! - [`ErrorCounters`]: eight `u32` varints: `cobs, crc, decode, oversize,
 //!   version, lost, stale, range`.
 //! - `stage_counts`: decode, map, synth, solve, servo, total (instruction
