@@ -1158,6 +1158,90 @@ fn warm_start() {
     assert!(warm_it * 2 < cold_it, "{warm_it} vs {cold_it}");
 }
 
+/// Goals that are already met stay put: with the body root fixed, the legs
+/// move only the feet, so feet goals met at the start (0.05 mm off, within
+/// the tolerance) leave every leg angle
+/// bit for bit as it was while the hands reach 2 cm away. And the pose the
+/// solver returns (placed incrementally, only where angles changed) is the
+/// `f64` reference forward kinematics of the angles it returns, for these and
+/// for random goal sets with the root floating.
+#[test]
+fn met_goals_hold_still_and_the_pose_follows_the_angles() {
+    use cmu::index::*;
+    let body = &cmu::BODY;
+    let mut rng = Rng(0x5E77_1ED);
+    let root = Vec3::new(0.0, 0.95, 0.0);
+    let check_pose = |a: &A, pose: &Pose<64>, what: &str| {
+        let reference = ref_pose(body, a);
+        for (s, (p, q)) in pose
+            .positions
+            .iter()
+            .zip(&reference.p)
+            .enumerate()
+            .take(body.len())
+        {
+            let d = reference::dist([p.x.into(), p.y.into(), p.z.into()], *q);
+            assert!(d < 2e-5, "{what}: segment {s} is {d} m from the reference");
+        }
+    };
+    // LHipJoint (1) and RHipJoint (6) have no index constant.
+    let legs = [
+        1,
+        LEFT_UP_LEG,
+        LEFT_LEG,
+        LEFT_FOOT,
+        6,
+        RIGHT_UP_LEG,
+        RIGHT_LEG,
+        RIGHT_FOOT,
+    ];
+    for trial in 0..8 {
+        let start = random_pose(body, &mut rng, root);
+        let mut goals = GoalSet::<4>::new();
+        for seg in [LEFT_HAND, RIGHT_HAND, LEFT_FOOT, RIGHT_FOOT] {
+            let mut p = ref_touch(body, &start, seg);
+            if seg == LEFT_HAND || seg == RIGHT_HAND {
+                p = reference::add(p, [rng.uniform(-0.0115, 0.0115), -0.0115, 0.0115]);
+            } else {
+                // Met: 0.05 mm off, within the 0.1 mm tolerance.
+                p = reference::add(p, [0.0, 5e-5, 0.0]);
+            }
+            goals.push(Goal::reach(seg, vf(p), 1.0)).unwrap();
+        }
+        let mut a = start;
+        let mut pose = Pose::<64>::default();
+        let report = solve(&Solver::DEFAULT, body, &goals, &mut a, &mut pose).unwrap();
+        assert!(report.converged, "trial {trial}: {report:?}");
+        assert!(
+            report.residuals.iter().all(|&r| r <= 1e-4),
+            "trial {trial}: {report:?}"
+        );
+        for seg in legs {
+            let s = usize::from(seg);
+            assert_eq!(
+                a.values[s].map(f32::to_bits),
+                start.values[s].map(f32::to_bits),
+                "trial {trial}: segment {s} moved"
+            );
+        }
+        assert_ne!(
+            a.values[usize::from(LEFT_ARM)],
+            start.values[usize::from(LEFT_ARM)]
+        );
+        check_pose(&a, &pose, "fixed root");
+    }
+    let s = Solver::DEFAULT.with_root(RootMode::Float);
+    for trial in 0..20 {
+        let truth = random_pose(body, &mut rng, root);
+        let goals = random_goals(&mut rng, &truth);
+        let start = perturb(body, &mut rng, &truth, 0.2);
+        let mut a = start;
+        let mut pose = Pose::<64>::default();
+        solve(&s, body, &goals, &mut a, &mut pose).unwrap();
+        check_pose(&a, &pose, &format!("floating root, trial {trial}"));
+    }
+}
+
 /// A live loop's solver state: frame after frame, `solve_with` and a state
 /// carried from the previous frame give bit-identical angles, poses and
 /// reports to fresh `solve` calls, while the goals move, a goal is switched

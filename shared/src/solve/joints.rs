@@ -50,6 +50,10 @@ pub(super) struct Group {
     pub max: Vec3,
     /// Sine and cosine of the first DOF's angle (for the middle axis).
     turn: (f32, f32),
+    /// Takes part in the current linearisation ([`Joints::settle`]).
+    pub live: bool,
+    /// Its values changed since the last forward kinematics.
+    moved: bool,
 }
 
 /// A joint's rotation relative to its parent, kept with the angles it was
@@ -138,6 +142,8 @@ const NO_GROUP: Group = Group {
     min: Vec3::ZERO,
     max: Vec3::ZERO,
     turn: (0.0, 0.0),
+    live: false,
+    moved: false,
 };
 const NO_DOFS: Dofs = Dofs {
     curvature: Vec3::ZERO,
@@ -182,8 +188,8 @@ pub(super) struct Joints<const N: usize> {
     pub count: usize,
     /// The segments the forward kinematics visits, in order (those that
     /// carry a goal or a goal's frame, and their ancestors), each with its
-    /// group or [`FIXED`].
-    order: [(u8, u8); N],
+    /// group or [`FIXED`], and its parent ([`FIXED`] for the root).
+    order: [(u8, u8, u8); N],
     /// Segments in `order`.
     nodes: usize,
     /// Bit `s`: segment `s` is in `order`.
@@ -192,6 +198,17 @@ pub(super) struct Joints<const N: usize> {
     moving: u64,
     /// The root position before the step.
     back_root: Vec3,
+    /// Bit `j`: slot `j` is not met; sets the live groups
+    /// ([`Joints::settle`]).
+    unmet: u16,
+    /// Bit `j`: slot `j` is moved by a live group.
+    pub reach: u16,
+    /// The root position changed since the last forward kinematics.
+    root_moved: bool,
+    /// The pose in the work is that of the angles, except for the groups
+    /// marked `moved` and the root if `root_moved` (false: the next forward
+    /// kinematics places the whole path).
+    placed: bool,
     /// Per segment, the rotation of its joint (and for a moving one, `turn`
     /// in its group) at the angles it was last computed at.
     local: [Local; N],
@@ -207,11 +224,15 @@ impl<const N: usize> Joints<N> {
         dofs: [NO_DOFS; N],
         links: [[NO_LINK; 2]; N],
         count: 0,
-        order: [(0, 0); N],
+        order: [(0, 0, 0); N],
         nodes: 0,
         path: 0,
         moving: 0,
         back_root: Vec3::ZERO,
+        unmet: 0,
+        reach: 0,
+        root_moved: false,
+        placed: false,
         local: [Local::NONE; N],
         generation: 0,
     };
@@ -278,7 +299,8 @@ impl<const N: usize> Joints<N> {
                 FIXED
             };
             if let Some(o) = self.order.get_mut(self.nodes) {
-                *o = (u8::try_from(s).unwrap_or(0), group);
+                let parent = if s == 0 { FIXED } else { seg.parent };
+                *o = (u8::try_from(s).unwrap_or(0), group, parent);
                 self.nodes += 1;
             }
         }
@@ -338,11 +360,16 @@ impl<const N: usize> Joints<N> {
         }
         for (g, d) in self
             .groups
-            .iter()
+            .iter_mut()
             .zip(self.dofs.iter_mut())
             .take(self.count)
         {
+            if !g.live {
+                continue;
+            }
+            g.moved = true;
             if g.translation() {
+                self.root_moved = true;
                 work.angles.root_position += d.delta * scale;
                 continue;
             }
@@ -364,9 +391,14 @@ impl<const N: usize> Joints<N> {
     }
 
     /// Goes back to the values [`Joints::apply`] kept.
-    pub fn back(&self, work: &mut Work<'_, '_, N>) {
+    pub fn back(&mut self, work: &mut Work<'_, '_, N>) {
         work.angles.root_position = self.back_root;
-        for (d, g) in self.dofs.iter().zip(&self.groups).take(self.count) {
+        self.root_moved = true;
+        for (d, g) in self.dofs.iter().zip(&mut self.groups).take(self.count) {
+            if !g.live {
+                continue;
+            }
+            g.moved = true;
             if let Some(x) = work.angles.get_mut(usize::from(g.seg)) {
                 *x = d.back.to_array();
             }
@@ -386,7 +418,8 @@ impl<const N: usize> Joints<N> {
     }
 
     /// Puts back what [`Joints::save`] took.
-    pub fn restore(&self, work: &mut Work<'_, '_, N>, saved: &Saved<N>) {
+    pub fn restore(&mut self, work: &mut Work<'_, '_, N>, saved: &Saved<N>) {
+        self.placed = false;
         work.angles.root_position = saved.root;
         for (v, g) in saved.values.iter().zip(self.groups()) {
             if let Some(x) = work.angles.get_mut(usize::from(g.seg)) {
@@ -454,17 +487,42 @@ pub(super) struct Saved<const N: usize> {
 }
 
 impl<const N: usize> Joints<N> {
-    /// Forward kinematics of the path segments: every path segment's world
-    /// placement (into the work's pose, exactly as [`crate::pose::forward`]
-    /// computes it). The other segments are left as they are.
+    /// Marks every segment as changed: the next [`Joints::forward`] places
+    /// the whole path (the pose in `work` is not yet that of the angles).
+    pub fn unplaced(&mut self) {
+        self.placed = false;
+    }
+
+    /// Forward kinematics of the path segments: the world placement (into
+    /// the work's pose, exactly as [`crate::pose::forward`] computes it) of
+    /// every path segment whose angles, or an ancestor's, changed since the
+    /// last call. The other segments are left as they are.
     pub fn forward(&mut self, work: &mut Work<'_, '_, N>) {
-        for &(s, group) in self.order.iter().take(self.nodes) {
+        // Per segment: placed again in this pass (its children follow).
+        let mut placed_again = [false; N];
+        for &(s, group, parent) in self.order.iter().take(self.nodes) {
             let s = usize::from(s);
-            let placed = match self.groups.get_mut(usize::from(group)) {
-                Some(g) if group != FIXED => {
+            let group = match group {
+                FIXED => None,
+                g => self.groups.get_mut(usize::from(g)),
+            };
+            let own = match &group {
+                Some(g) => g.moved,
+                None => s == 0 && self.root_moved,
+            };
+            let after_parent = placed_again.get(usize::from(parent)) == Some(&true);
+            if self.placed && !own && !after_parent {
+                continue;
+            }
+            if let Some(p) = placed_again.get_mut(s) {
+                *p = true;
+            }
+            let placed = match group {
+                Some(g) => {
+                    g.moved = false;
                     place_moving(work, g, (self.generation, &mut self.local))
                 }
-                _ => place_fixed(work, s, (self.generation, &mut self.local)),
+                None => place_fixed(work, s, (self.generation, &mut self.local)),
             };
             if let (Some((p, r)), Some(op), Some(or)) = (
                 placed,
@@ -475,6 +533,7 @@ impl<const N: usize> Joints<N> {
                 *or = r;
             }
         }
+        (self.placed, self.root_moved) = (true, false);
     }
 
     /// The world placement of the segments off the path.
@@ -610,6 +669,37 @@ fn world_axes(g: &Group, rp: Quat, rs: Quat) -> [Vec3; 3] {
 }
 
 impl<const N: usize> Joints<N> {
+    /// Chooses the groups the next linearisation moves: those that move a
+    /// goal not yet met (residual above `√tol2`). A met goal whose joints
+    /// move no unmet goal is left where it is, and so are those joints: a
+    /// step would gain at most `w·tol2` from it. Also finds the slots the
+    /// live groups move ([`Joints::reach`]): their rows stay in the step,
+    /// so that a shared joint does not pull a met goal away.
+    pub fn settle(&mut self, slots: &Slots, tol2: f32) {
+        let unmet = slots.iter().enumerate().fold(0u16, |m, (j, s)| {
+            if s.r.length_squared() > tol2 {
+                m | 1 << j
+            } else {
+                m
+            }
+        });
+        let mut reach = 0u16;
+        for g in self.groups.iter_mut().take(self.count) {
+            let moves = g.dep_a | g.dep_b;
+            g.live = moves & unmet != 0;
+            if g.live {
+                reach |= moves;
+            }
+        }
+        (self.unmet, self.reach) = (unmet, reach);
+    }
+
+    /// The goals that are not met ([`Joints::settle`]): with the layout,
+    /// they decide which groups are live.
+    pub fn unmet(&self) -> u16 {
+        self.unmet
+    }
+
     /// Builds every group's links and columns at the current pose; each DOF's
     /// curvature, gradient and tension (from the goals the last step did not
     /// bring much closer), and the steps to its limits.
@@ -622,6 +712,11 @@ impl<const N: usize> Joints<N> {
             .zip(self.dofs.iter_mut())
             .take(self.count)
         {
+            if !g.live {
+                // Held where it is: no links, no step.
+                (g.len, d.delta) = (0, Vec3::ZERO);
+                continue;
+            }
             let (p, axes) = geometry(work, g);
             let v = Vec3::from_array(g.values(work));
             *d = Dofs {
@@ -837,6 +932,7 @@ mod tests {
         joints.init(&Solver::DEFAULT, &tree, &work, &slots);
         joints.forward(&mut work);
         slots.evaluate(&work).unwrap();
+        joints.settle(&slots, 0.0);
         joints.linearise(&work, &slots).unwrap();
         let point = |a: &Angles<32>, g: &Goal| {
             let (mut l, mut p) = (LocalPose::<32>::default(), Pose::<32>::default());

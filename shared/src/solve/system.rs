@@ -45,9 +45,10 @@ pub(super) struct System {
     /// Bit `s` of entry `t`: block `(t, s)` of the factor may be nonzero
     /// (the goals share a moving joint, or fill-in).
     coupled: Coupling,
-    /// The awake slots `coupled` was found for, with the current joint
-    /// layout (`None`: not yet).
-    coupled_for: Option<u16>,
+    /// The awake slots and the unmet slots (which decide the live groups)
+    /// `coupled` was found for, with the current joint layout (`None`: not
+    /// yet).
+    coupled_for: Option<(u16, u16)>,
     /// Bit `j`: slot `j` takes part.
     awake: u16,
 }
@@ -87,7 +88,7 @@ impl System {
         lambda2: f32,
     ) -> bool {
         let mut r = slots.rhs();
-        self.awake = slots.awake();
+        self.awake = slots.awake() & joints.reach;
         for round in 0..2 {
             if round > 0 {
                 joints.sums(slots, self.awake, &r);
@@ -136,7 +137,8 @@ impl System {
         }
         // Which goals share a joint depends only on the layout and the
         // awake goals.
-        let known = self.coupled_for == Some(self.awake);
+        let key = (self.awake, joints.unmet());
+        let known = self.coupled_for == Some(key);
         if !known {
             self.coupled = [0; MAX_GOALS];
         }
@@ -146,6 +148,9 @@ impl System {
             .zip(joints.dofs.iter_mut())
             .take(joints.count)
         {
+            if !g.live {
+                continue;
+            }
             damp(d, lambda2);
             let links = links_of(&joints.links, g);
             outer(&mut self.a, links, self.awake, d.inv_d);
@@ -155,7 +160,7 @@ impl System {
         }
         if !known {
             fill_in(&mut self.coupled, n);
-            self.coupled_for = Some(self.awake);
+            self.coupled_for = Some(key);
         }
     }
 
@@ -171,11 +176,15 @@ impl System {
     ) -> bool {
         let mut woke = false;
         for (j, (slot, rj)) in slots.iter().zip(r.iter_mut()).enumerate() {
-            if self.awake >> j & 1 != 0 {
+            // Awake, or moved by no live group: nothing to wake.
+            if self.awake >> j & 1 != 0 || joints.reach >> j & 1 == 0 {
                 continue;
             }
             let mut ds = 0.0;
             for (g, d) in joints.groups().iter().zip(&joints.dofs) {
+                if !g.live {
+                    continue;
+                }
                 let (da, db) = (g.dep_a >> j & 1 != 0, g.dep_b >> j & 1 != 0);
                 if da || db {
                     let (p, axes) = geometry(work, g);
@@ -234,6 +243,9 @@ fn spread<const N: usize>(
         .zip(joints.dofs.iter_mut())
         .take(joints.count)
     {
+        if !g.live {
+            continue;
+        }
         let links = links_of(&joints.links, g);
         let mut cy = Vec3::ZERO;
         for l in links.iter().filter(|l| awake >> l.slot & 1 != 0) {

@@ -112,6 +112,7 @@ impl<const N: usize> Lm<N> {
         solver: &Solver,
         work: &mut Work<'_, '_, N>,
     ) -> Result<(u32, bool), SolveError> {
+        self.joints.unplaced();
         self.refresh(work)?;
         let tol2 = solver.tolerance * solver.tolerance;
         let mut lambda = math::max(MIN_DAMPING, solver.damping);
@@ -123,6 +124,7 @@ impl<const N: usize> Lm<N> {
             }
             iterations += 1;
             if fresh {
+                self.joints.settle(&self.slots, tol2);
                 self.joints.linearise(work, &self.slots)?;
                 fresh = false;
             }
