@@ -23,6 +23,14 @@
 //! the columns (a cross product per DOF and goal it moves), and one block
 //! Cholesky factorisation of the goal rows per round of clamping.
 //!
+//! Goals already met hold still: each linearisation moves only the joints
+//! that move a goal not yet within `tolerance`, and keeps the rows of every
+//! goal those joints move, so that a shared joint does not pull a met goal
+//! away. A met goal's own chain would gain at most `w·tolerance²`; on the
+//! CMU skeleton reaching with hands and feet, the last iteration of a typical
+//! solve moves only the arms and the spine. Forward kinematics then places
+//! only the segments whose angles, or an ancestor's, changed.
+//!
 //! The problem is not convex: joint limits and folding limbs leave other
 //! minima. With [`Solver::restarts`], when the goals are not all met, the
 //! solve is repeated from the rest pose and from poses spread over the moving
