@@ -219,6 +219,15 @@ impl Joint {
         self.dofs.get(..usize::from(self.count)).unwrap_or(&[])
     }
 
+    /// All three DOF entries: the degrees of freedom in order, then the
+    /// unused entries, each about X with limits 0 (as every constructor
+    /// leaves them).
+    #[inline]
+    #[must_use]
+    pub(crate) const fn entries(&self) -> &[Dof; 3] {
+        &self.dofs
+    }
+
     /// The number of degrees of freedom.
     #[inline]
     #[must_use]

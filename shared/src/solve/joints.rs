@@ -17,9 +17,9 @@
 //! computes it again only when they change (bit for bit the same numbers).
 
 use super::reach::bit;
-use super::slots::{Kind, MAX_GOALS, Slot, Slots};
-use super::{ReachTree, RootMode, SolveError, Solver, Work};
-use crate::body::{Axis, Segment};
+use super::slots::{Kind, Slot, Slots};
+use super::{RootMode, SolveError, Solver, Work};
+use crate::body::{Axis, Body, Segment};
 use crate::goal::Frame;
 use crate::math;
 use glam::{Mat3, Quat, Vec3};
@@ -188,8 +188,6 @@ pub(super) struct Joints<const N: usize> {
     nodes: usize,
     /// Bit `s`: segment `s` is in `order`.
     path: u64,
-    /// Bit `s`: segment `s`'s joint moves.
-    moving: u64,
     /// The root position before the step.
     back_root: Vec3,
     /// Per segment, the rotation of its joint (and for a moving one, `turn`
@@ -210,32 +208,45 @@ impl<const N: usize> Joints<N> {
         order: [(0, 0); N],
         nodes: 0,
         path: 0,
-        moving: 0,
         back_root: Vec3::ZERO,
         local: [Local::NONE; N],
         generation: 0,
     };
 
     /// Finds the groups that move for these goals, in segment order (the
-    /// translation first), in place of any it held.
-    pub fn init(
-        &mut self,
-        solver: &Solver,
-        tree: &ReachTree<N>,
-        work: &Work<'_, '_, N>,
-        slots: &Slots,
-    ) {
-        (self.count, self.nodes, self.path, self.moving) = (0, 0, 0, 0);
+    /// translation first), in place of any it held: the joints of the
+    /// segments that the goals and their frames hang from (the reach tree's
+    /// simple chains), strictly below the anchor: the body root
+    /// ([`RootMode::Fixed`]) or the goals' lowest common ancestor, the reach
+    /// tree's root ([`RootMode::Float`]). Found from the goals' ancestries,
+    /// without building the tree.
+    pub fn init(&mut self, solver: &Solver, work: &Work<'_, '_, N>, slots: &Slots) {
+        (self.count, self.nodes) = (0, 0);
         self.generation = self.generation.wrapping_add(1);
         if self.generation == 0 {
             // Wrapped: forget every entry for certain.
             (self.local, self.generation) = ([Local::NONE; N], 1);
         }
-        let masks = self.slot_masks(tree, work, slots);
-        let masks = masks.get(..slots.count).unwrap_or(&[]);
-        let anchor = match solver.root {
+        let body = work.body;
+        // Per segment, the slots whose point and whose frame it moves; the
+        // union of the goals' ancestries (the path) and their intersection
+        // (the ancestry of their lowest common ancestor).
+        let mut moves = [(0u16, 0u16); N];
+        let (mut path, mut common, mut dep_a, mut dep_b) = (0u64, u64::MAX, 0u16, 0u16);
+        for (j, slot) in slots.iter().enumerate() {
+            let Some(g) = work.goals.get(usize::from(slot.goal)) else {
+                continue;
+            };
+            let point = climb(body, usize::from(g.segment), 1 << j, false, &mut moves);
+            (path, common, dep_a) = (path | point, common & point, dep_a | 1 << j);
+            if let Frame::Segment(f) = g.frame {
+                let frame = climb(body, usize::from(f), 1 << j, true, &mut moves);
+                (path, common, dep_b) = (path | frame, common & frame, dep_b | 1 << j);
+            }
+        }
+        self.path = path;
+        let fixed = match solver.root {
             RootMode::Float => {
-                let (dep_a, dep_b) = deps(masks, u64::MAX);
                 self.push(Group {
                     seg: TRANSLATION,
                     count: 3,
@@ -245,34 +256,18 @@ impl<const N: usize> Joints<N> {
                     max: Vec3::INFINITY,
                     ..NO_GROUP
                 });
-                None
+                common
             }
-            RootMode::Fixed => Some(0),
+            RootMode::Fixed => bit(0),
         };
-        // Per segment, the slots whose point and whose frame it moves.
-        let mut moves = [(0u16, 0u16); N];
-        for (j, &(point, frame)) in masks.iter().enumerate() {
-            for (mut m, frame) in [(point, false), (frame, true)] {
-                while m != 0 {
-                    let s = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    if let Some(d) = moves.get_mut(s) {
-                        let d = if frame { &mut d.1 } else { &mut d.0 };
-                        *d |= 1 << j;
-                    }
-                }
-            }
-        }
         // The path in segment order; a moving joint's group as it comes.
-        let mut path = self.path;
         while path != 0 {
             let s = path.trailing_zeros() as usize;
             path &= path - 1;
-            let (Some(seg), Some(&deps)) = (work.body.segments.get(s), moves.get(s)) else {
+            let (Some(seg), Some(&deps)) = (body.segments.get(s), moves.get(s)) else {
                 continue;
             };
-            let group = if s > 0 && seg.joint.count() > 0 && tree.moves(s, anchor) {
-                self.moving |= bit(s);
+            let group = if fixed & bit(s) == 0 && seg.joint.count() > 0 {
                 self.push(joint_group(s, seg, deps))
             } else {
                 FIXED
@@ -282,28 +277,6 @@ impl<const N: usize> Joints<N> {
                 self.nodes += 1;
             }
         }
-    }
-
-    /// Per slot, the ancestry of its segment and of its frame segment; the
-    /// union of all of them is the path.
-    fn slot_masks(
-        &mut self,
-        tree: &ReachTree<N>,
-        work: &Work<'_, '_, N>,
-        slots: &Slots,
-    ) -> [(u64, u64); MAX_GOALS] {
-        let mut masks = [(0u64, 0u64); MAX_GOALS];
-        for (m, slot) in masks.iter_mut().zip(slots.iter()) {
-            if let Some(g) = work.goals.get(usize::from(slot.goal)) {
-                let frame = match g.frame {
-                    Frame::World => 0,
-                    Frame::Segment(f) => tree.ancestry(usize::from(f)),
-                };
-                *m = (tree.ancestry(usize::from(g.segment)), frame);
-                self.path |= m.0 | m.1;
-            }
-        }
-        masks
     }
 
     /// Appends a group; returns its index ([`FIXED`] if there is no room).
@@ -396,44 +369,47 @@ impl<const N: usize> Joints<N> {
     }
 }
 
-/// The slots whose point (`.0`) and whose frame segment (`.1`) the joints of
-/// the segments in `b` move, given each slot's ancestry masks.
-fn deps(masks: &[(u64, u64)], b: u64) -> (u16, u16) {
-    masks
-        .iter()
-        .enumerate()
-        .fold((0u16, 0u16), |(a, f), (k, m)| {
-            (
-                if m.0 & b != 0 { a | 1 << k } else { a },
-                if m.1 & b != 0 { f | 1 << k } else { f },
-            )
-        })
+/// The ancestry of segment `s` (itself and its ancestors, as a mask); marks
+/// slot bit `slot` in each one's entry of `moves` (`.1` for a goal's frame
+/// segment, `.0` for its own).
+fn climb<const N: usize>(
+    body: &Body<'_>,
+    s: usize,
+    slot: u16,
+    frame: bool,
+    moves: &mut [(u16, u16); N],
+) -> u64 {
+    let (mut mask, mut at) = (0u64, Some(s));
+    while let Some(s) = at {
+        mask |= bit(s);
+        if let Some(d) = moves.get_mut(s) {
+            let d = if frame { &mut d.1 } else { &mut d.0 };
+            *d |= slot;
+        }
+        // Parents come before children (checked): the climb ends.
+        at = body.parent(s).filter(|&p| p < s);
+    }
+    mask
 }
 
-/// The group of segment `s`'s joint.
+/// The group of segment `s`'s joint (unused DOFs: about X, limits 0).
+#[inline]
 fn joint_group(s: usize, seg: &Segment<'_>, (dep_a, dep_b): (u16, u16)) -> Group {
-    let mut g = Group {
+    let [a, b, c] = seg.joint.entries();
+    Group {
         seg: u8::try_from(s).unwrap_or(0),
         parent: seg.parent,
-        offset: seg.origin,
+        count: u8::try_from(seg.joint.count()).unwrap_or(0),
+        axes: [a.axis, b.axis, c.axis],
+        start: 0,
+        len: 0,
         dep_a,
         dep_b,
-        ..NO_GROUP
-    };
-    let (mut min, mut max) = ([0.0f32; 3], [0.0f32; 3]);
-    for (((d, a), lo), hi) in seg
-        .joint
-        .dofs()
-        .iter()
-        .zip(&mut g.axes)
-        .zip(&mut min)
-        .zip(&mut max)
-    {
-        (*a, *lo, *hi) = (d.axis, d.min, d.max);
-        g.count += 1;
+        offset: seg.origin,
+        min: Vec3::new(a.min, b.min, c.min),
+        max: Vec3::new(a.max, b.max, c.max),
+        turn: (0.0, 0.0),
     }
-    (g.min, g.max) = (Vec3::from_array(min), Vec3::from_array(max));
-    g
 }
 
 /// The links of group `g` in the link store.
@@ -830,11 +806,10 @@ mod tests {
         let mut angles = a;
         let mut work = Work::new(&body, &goals, &mut angles, &mut pose);
         work.check().unwrap();
-        let tree = ReachTree::<32>::build(&body, &goals).unwrap();
         let mut slots = Slots::EMPTY;
         slots.init(&goals, 4.0).unwrap();
         let mut joints = Joints::<32>::EMPTY;
-        joints.init(&Solver::DEFAULT, &tree, &work, &slots);
+        joints.init(&Solver::DEFAULT, &work, &slots);
         joints.forward(&mut work);
         slots.evaluate(&work).unwrap();
         joints.linearise(&work, &slots).unwrap();

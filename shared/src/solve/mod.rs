@@ -326,19 +326,21 @@ pub fn solve_with<const N: usize, const G: usize>(
     let laid_out = layout.is_some() && state.layout == layout;
     // Valid again only once this solve has built what it needs.
     state.layout = None;
-    let tree = &mut state.tree;
-    if !laid_out {
-        *tree = ReachTree::EMPTY;
-        tree.fill(body, goals.as_slice())?;
-    }
-    let (iterations, converged) = if tree.is_empty() {
-        work.forward()?;
-        (0, true)
-    } else if solver.method == Method::TreeDls {
-        tree::solve(solver, tree, &mut state.lm, laid_out, &mut work)?
+    let (iterations, converged) = if solver.method == Method::TreeDls {
+        // Finds the reach tree's joints from the goals, without the tree.
+        tree::solve(solver, &mut state.lm, laid_out, &mut work)?
     } else {
+        let tree = &mut state.tree;
+        if !laid_out {
+            *tree = ReachTree::EMPTY;
+            tree.fill(body, goals.as_slice())?;
+        }
         work.forward()?;
-        balance::solve(solver, tree, &mut work)?
+        if tree.is_empty() {
+            (0, true)
+        } else {
+            balance::solve(solver, tree, &mut work)?
+        }
     };
     state.layout = layout;
     let mut report = Report {
