@@ -270,6 +270,7 @@ impl Joint {
     }
 
     /// `values` clamped to the limits; unused entries set to 0.
+    #[inline]
     #[must_use]
     pub fn clamp(&self, values: &[f32; 3]) -> [f32; 3] {
         // By count, as in `rotation` (no iterator calls at opt-level "s").
