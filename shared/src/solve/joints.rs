@@ -475,7 +475,7 @@ impl<const N: usize> Joints<N> {
 
 /// The world placement of segment `s` (the root: its own) from its parent's
 /// and its joint's rotation at the current angles (kept in `cache`).
-#[inline]
+#[inline(always)]
 fn place_fixed<const N: usize>(
     work: &Work<'_, '_, N>,
     s: usize,
