@@ -349,12 +349,21 @@ pub fn solve_with<const N: usize, const G: usize>(
         residuals: [0.0; G],
         error: 0.0,
     };
+    // With an active goal, tree DLS leaves every active goal's residual at
+    // the final pose in its slots (in goal order): the same numbers as
+    // evaluating the goal again.
+    let slots = (solver.method == Method::TreeDls).then(|| state.lm.slots());
+    let mut kept = slots.into_iter().flat_map(|s| s.iter()).peekable();
     for ((r, g), i) in report.residuals.iter_mut().zip(goals.as_slice()).zip(0u8..) {
-        *r = g
-            .evaluate(body, work.pose)
-            .ok_or(SolveError::BadGoal(i))?
-            .magnitude();
-        if g.is_active() {
+        let active = g.is_active();
+        *r = match kept.next_if(|s| active && s.goal == i) {
+            Some(slot) => slot.magnitude(),
+            None => g
+                .evaluate(body, work.pose)
+                .ok_or(SolveError::BadGoal(i))?
+                .magnitude(),
+        };
+        if active {
             report.error += g.weight * *r * *r;
         }
     }

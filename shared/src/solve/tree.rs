@@ -59,6 +59,12 @@ impl<const N: usize> Lm<N> {
         slots: Slots::EMPTY,
         system: System::EMPTY,
     };
+
+    /// The active goals as [`solve`] left them: at its final pose, if it
+    /// returned with an active goal.
+    pub fn slots(&self) -> &Slots {
+        &self.slots
+    }
 }
 
 /// Weighted DLS over the whole reach tree; returns (iterations, converged).
