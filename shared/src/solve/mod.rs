@@ -412,7 +412,7 @@ impl<const N: usize> Default for SolverState<N> {
 /// What the reach tree and the joint layout depend on: the body (by the
 /// addresses of its tables and its length), the method and root mode, and
 /// per active goal, in order, its segment and frame segment.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Eq)]
 struct Layout {
     body: [usize; 4],
     method: Method,
@@ -420,6 +420,17 @@ struct Layout {
     count: usize,
     /// Segment and frame segment (`u8::MAX`: the world) of each active goal.
     goals: [(u8, u8); MAX_GOALS],
+}
+
+impl PartialEq for Layout {
+    /// Field by field and word by word (the derived comparison is a call of
+    /// a byte-wise `memcmp` on the M4F).
+    fn eq(&self, other: &Self) -> bool {
+        let ([a, b, c, d], [e, f, g, h]) = (self.body, other.body);
+        (a, b, c, d) == (e, f, g, h)
+            && (self.method, self.root, self.count) == (other.method, other.root, other.count)
+            && self.goals.iter().zip(&other.goals).all(|(x, y)| x == y)
+    }
 }
 
 impl Layout {
