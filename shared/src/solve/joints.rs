@@ -16,7 +16,6 @@
 //! keeps each joint's rotation with the angles it was computed at and
 //! computes it again only when they change (bit for bit the same numbers).
 
-use super::reach::bit;
 use super::slots::{Kind, Slot, Slots};
 use super::{RootMode, SolveError, Solver, Work};
 use crate::body::{Axis, Body, Segment};
@@ -218,64 +217,65 @@ impl<const N: usize> Joints<N> {
     /// segments that the goals and their frames hang from (the reach tree's
     /// simple chains), strictly below the anchor: the body root
     /// ([`RootMode::Fixed`]) or the goals' lowest common ancestor, the reach
-    /// tree's root ([`RootMode::Float`]). Found from the goals' ancestries,
-    /// without building the tree.
+    /// tree's root ([`RootMode::Float`]). Found by climbing from each goal's
+    /// segment and frame segment, without building the tree.
     pub fn init(&mut self, solver: &Solver, work: &Work<'_, '_, N>, slots: &Slots) {
-        (self.count, self.nodes) = (0, 0);
+        (self.count, self.nodes, self.path) = (0, 0, 0);
         self.generation = self.generation.wrapping_add(1);
         if self.generation == 0 {
             // Wrapped: forget every entry for certain.
             (self.local, self.generation) = ([Local::NONE; N], 1);
         }
         let body = work.body;
-        // Per segment, the slots whose point and whose frame it moves; the
-        // union of the goals' ancestries (the path) and their intersection
-        // (the ancestry of their lowest common ancestor).
+        // Per segment, the slots whose point and whose frame it moves; and
+        // the slots with a point and with a frame.
         let mut moves = [(0u16, 0u16); N];
-        let (mut path, mut common, mut dep_a, mut dep_b) = (0u64, u64::MAX, 0u16, 0u16);
+        let (mut dep_a, mut dep_b) = (0u16, 0u16);
         for (j, slot) in slots.iter().enumerate() {
             let Some(g) = work.goals.get(usize::from(slot.goal)) else {
                 continue;
             };
-            let point = climb(body, usize::from(g.segment), 1 << j, false, &mut moves);
-            (path, common, dep_a) = (path | point, common & point, dep_a | 1 << j);
+            climb(body, usize::from(g.segment), (1 << j, 0), &mut moves);
+            dep_a |= 1 << j;
             if let Frame::Segment(f) = g.frame {
-                let frame = climb(body, usize::from(f), 1 << j, true, &mut moves);
-                (path, common, dep_b) = (path | frame, common & frame, dep_b | 1 << j);
+                climb(body, usize::from(f), (0, 1 << j), &mut moves);
+                dep_b |= 1 << j;
             }
         }
-        self.path = path;
-        let fixed = match solver.root {
-            RootMode::Float => {
-                self.push(Group {
-                    seg: TRANSLATION,
-                    count: 3,
-                    dep_a,
-                    dep_b,
-                    min: Vec3::NEG_INFINITY,
-                    max: Vec3::INFINITY,
-                    ..NO_GROUP
-                });
-                common
-            }
-            RootMode::Fixed => bit(0),
-        };
-        // The path in segment order; a moving joint's group as it comes.
-        while path != 0 {
-            let s = path.trailing_zeros() as usize;
-            path &= path - 1;
-            let (Some(seg), Some(&deps)) = (body.segments.get(s), moves.get(s)) else {
-                continue;
+        if solver.root == RootMode::Float {
+            self.push(Group {
+                seg: TRANSLATION,
+                count: 3,
+                dep_a,
+                dep_b,
+                min: Vec3::NEG_INFINITY,
+                max: Vec3::INFINITY,
+                ..NO_GROUP
+            });
+        }
+        // The path (the segments that move a slot) in segment order; a
+        // moving joint's group as it comes. The anchor and its ancestors move
+        // every slot's point and frame.
+        let mut at = 1u64;
+        for (s, (seg, &deps)) in body.segments.iter().zip(&moves).enumerate() {
+            let on_path = deps != (0, 0);
+            let above = match solver.root {
+                RootMode::Float => deps == (dep_a, dep_b),
+                RootMode::Fixed => s == 0,
             };
-            let group = if fixed & bit(s) == 0 && seg.joint.count() > 0 {
-                self.push(joint_group(s, seg, deps))
-            } else {
-                FIXED
-            };
-            if let Some(o) = self.order.get_mut(self.nodes) {
-                *o = (u8::try_from(s).unwrap_or(0), group);
-                self.nodes += 1;
+            if on_path {
+                let group = if !above && seg.joint.count() > 0 {
+                    self.push(joint_group(s, seg, deps))
+                } else {
+                    FIXED
+                };
+                if let Some(o) = self.order.get_mut(self.nodes) {
+                    *o = (u8::try_from(s).unwrap_or(0), group);
+                    self.nodes += 1;
+                }
+                self.path |= at;
             }
+            at <<= 1;
         }
     }
 
@@ -369,27 +369,22 @@ impl<const N: usize> Joints<N> {
     }
 }
 
-/// The ancestry of segment `s` (itself and its ancestors, as a mask); marks
-/// slot bit `slot` in each one's entry of `moves` (`.1` for a goal's frame
-/// segment, `.0` for its own).
+/// Marks the slot bits `mark` (point, frame) in the entries of `moves` of
+/// segment `s` and its ancestors.
 fn climb<const N: usize>(
     body: &Body<'_>,
     s: usize,
-    slot: u16,
-    frame: bool,
+    (point, frame): (u16, u16),
     moves: &mut [(u16, u16); N],
-) -> u64 {
-    let (mut mask, mut at) = (0u64, Some(s));
+) {
+    let mut at = Some(s);
     while let Some(s) = at {
-        mask |= bit(s);
         if let Some(d) = moves.get_mut(s) {
-            let d = if frame { &mut d.1 } else { &mut d.0 };
-            *d |= slot;
+            (d.0, d.1) = (d.0 | point, d.1 | frame);
         }
         // Parents come before children (checked): the climb ends.
         at = body.parent(s).filter(|&p| p < s);
     }
-    mask
 }
 
 /// The group of segment `s`'s joint (unused DOFs: about X, limits 0).

@@ -218,7 +218,7 @@ impl<const N: usize> ReachTree<N> {
 /// The bit of segment `s` in a 64-bit mask (0 beyond 63).
 #[inline]
 #[must_use]
-pub fn bit(s: usize) -> u64 {
+fn bit(s: usize) -> u64 {
     1u64.checked_shl(u32::try_from(s).unwrap_or(64))
         .unwrap_or(0)
 }
