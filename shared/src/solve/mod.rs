@@ -47,11 +47,11 @@
 //! 6.7 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
 //! meets all goals on 30 of 32 problems (chain DLS and CCD 25). On the
 //! emulated Cortex-M4F (instruction counts, not cycles), tree DLS takes about
-//! 112 k instructions cold ([`solve`], 3 iterations) and 68 k warm (goals
+//! 106 k instructions cold ([`solve`], 3 iterations) and 66 k warm (goals
 //! moved ≤ 2 cm, [`solve_with`] with the [`SolverState`] of the previous
-//! frame, 2 iterations) built at `opt-level = 3`, and 126 k and 75 k in the
+//! frame, 2 iterations) built at `opt-level = 3`, and 119 k and 73 k in the
 //! firmware's `opt-level = "s"` build. One iteration (at 3) is about 26 k: the columns and their
-//! sums 8.3 k, forward kinematics of the 20 segments the goals hang from 5 k,
+//! sums 8.3 k, forward kinematics of the 20 segments the goals hang from 4.8 k,
 //! the step and its limits 4.2 k (two rounds when a joint limit clamps), the
 //! 3×3 blocks and the damping 5.2 k, the factorisation 2.2 k, applying the
 //! step 1.8 k. The iteration count is set by the problem's curvature, not the
@@ -59,14 +59,16 @@
 //! 0.01 mm (ten times less damping: 11 mm, 0.6 mm, 0.01 mm; a chord step,
 //! the last linearisation reused for the new residuals, leaves far more
 //! than a new one: 12 → 3.3 mm, 0.8 → 0.14 mm); from goals 1.5 cm away
-//! 2 mm, then 0.02 mm. A fresh working state costs about 14 k before the
-//! first iteration (clearing 13.5 kB, the reach tree, the joint layout) and
-//! the first forward kinematics 5 k; a kept state skips the first three
-//! while the goals stay on the same segments, and a start at the last
-//! solution skips the sines and cosines of the first forward kinematics
-//! (each joint's rotation is kept with its angles), leaving about 2.5 k of
-//! it. The final pose and the report cost about 2.5 k. Fewer moving DOFs or
-//! goals cost proportionally less.
+//! 2 mm, then 0.02 mm. A fresh working state costs about 10.5 k before the
+//! first iteration (clearing its 13.5 kB 5 k, the joint layout 3 k, checking
+//! and clamping the angles 1.8 k) and the first forward kinematics 4.8 k; a
+//! kept state skips the clearing and the layout while the goals stay on the
+//! same segments, and a start at the last solution skips the sines and
+//! cosines of the first forward kinematics (each joint's rotation is kept
+//! with its angles), leaving about 2.5 k of it. The final pose (the 11
+//! segments off the goals' paths) and the report cost about 3.5 k, 2 k when
+//! their rotations are kept. Fewer moving DOFs or goals cost proportionally
+//! less.
 //!
 //! Tree DLS is a local method: on 100 random CMU goal sets (`tests/solve.rs`)
 //! it ends at a local optimum every time, and with [`Solver::restarts`] = 3
@@ -306,10 +308,11 @@ pub fn solve<const N: usize, const G: usize>(
 
 /// [`solve`] with a working state that the caller keeps between solves.
 ///
-/// The state is built in place on the first call and kept: the reach tree and
-/// the layout of the moving joints are reused as long as the same body (by
-/// address), method, root mode and active goals on the same segments and
-/// frames come back; goal targets, weights and kinds may change freely. The
+/// The state is built in place on the first call and kept: the layout of the
+/// moving joints (tree DLS) or the reach tree (the balancing methods) is
+/// reused as long as the same body (by address), method, root mode and
+/// active goals on the same segments and frames come back; goal targets,
+/// weights and kinds may change freely. The
 /// result is bit-identical to [`solve`]'s. After changing a body's contents
 /// in place (same address), call [`SolverState::reset`].
 pub fn solve_with<const N: usize, const G: usize>(
@@ -371,8 +374,8 @@ pub fn solve_with<const N: usize, const G: usize>(
 }
 
 /// The working state of [`solve_with`], kept by the caller between solves
-/// (a live loop keeps one per figure): the reach tree, the moving joints and
-/// their Jacobian columns, each joint's rotation with the angles it was
+/// (a live loop keeps one per figure): the reach tree (of the balancing
+/// methods), the moving joints and their Jacobian columns, each joint's rotation with the angles it was
 /// computed at, the goal rows and the goal-space system. Sized by the body
 /// capacity `N`: about 280 bytes per segment of capacity plus 5 kB (13.5 kB
 /// for `N` = 31, 23 kB for `N` = 64). Nothing in it changes a result: a solve
