@@ -369,8 +369,8 @@ impl<const N: usize> Joints<N> {
     }
 }
 
-/// Marks the slot bits `mark` (point, frame) in the entries of `moves` of
-/// segment `s` and its ancestors.
+/// Adds the slot bits `(point, frame)` to the entries of `moves` of segment
+/// `s` and of its ancestors.
 fn climb<const N: usize>(
     body: &Body<'_>,
     s: usize,

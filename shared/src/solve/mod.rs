@@ -312,9 +312,9 @@ pub fn solve<const N: usize, const G: usize>(
 /// moving joints (tree DLS) or the reach tree (the balancing methods) is
 /// reused as long as the same body (by address), method, root mode and
 /// active goals on the same segments and frames come back; goal targets,
-/// weights and kinds may change freely. The
-/// result is bit-identical to [`solve`]'s. After changing a body's contents
-/// in place (same address), call [`SolverState::reset`].
+/// weights and kinds may change freely. The result is bit-identical to
+/// [`solve`]'s. After changing a body's contents in place (same address),
+/// call [`SolverState::reset`].
 pub fn solve_with<const N: usize, const G: usize>(
     solver: &Solver,
     body: &Body<'_>,
@@ -375,11 +375,12 @@ pub fn solve_with<const N: usize, const G: usize>(
 
 /// The working state of [`solve_with`], kept by the caller between solves
 /// (a live loop keeps one per figure): the reach tree (of the balancing
-/// methods), the moving joints and their Jacobian columns, each joint's rotation with the angles it was
-/// computed at, the goal rows and the goal-space system. Sized by the body
-/// capacity `N`: about 280 bytes per segment of capacity plus 5 kB (13.5 kB
-/// for `N` = 31, 23 kB for `N` = 64). Nothing in it changes a result: a solve
-/// with a kept state is bit-identical to one with a new state.
+/// methods), the moving joints and their Jacobian columns, each joint's
+/// rotation with the angles it was computed at, the goal rows and the
+/// goal-space system. Sized by the body capacity `N`: about 280 bytes per
+/// segment of capacity plus 5 kB (13.5 kB for `N` = 31, 23 kB for `N` = 64).
+/// Nothing in it changes a result: a solve with a kept state is
+/// bit-identical to one with a new state.
 pub struct SolverState<const N: usize> {
     tree: ReachTree<N>,
     lm: tree::Lm<N>,
