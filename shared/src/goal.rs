@@ -192,7 +192,10 @@ impl Goal {
     #[inline]
     #[must_use]
     pub fn is_active(&self) -> bool {
-        self.weight > 0.0 && self.weight.is_finite()
+        // The bits of the positive finite floats are 1 ..= those of MAX: one
+        // unsigned comparison (the compiler turns `> 0 && is_finite` into
+        // some 30 instructions of class tests on the M4F).
+        self.weight.to_bits().wrapping_sub(1) < f32::MAX.to_bits()
     }
 
     /// Whether the goal constrains a point (position or plane), as opposed to an
@@ -411,6 +414,27 @@ mod tests {
         assert!(!s.get(1).unwrap().is_active());
         s.clear();
         assert!(s.is_empty());
+    }
+
+    #[test]
+    fn active_means_positive_and_finite() {
+        let weights = [
+            0.0,
+            -0.0,
+            -1.0,
+            f32::MIN_POSITIVE,
+            1e-45,
+            1.0,
+            f32::MAX,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            -f32::NAN,
+        ];
+        for w in weights {
+            let g = Goal::reach(1, Vec3::ZERO, w);
+            assert_eq!(g.is_active(), w > 0.0 && w.is_finite(), "{w}");
+        }
     }
 
     #[test]

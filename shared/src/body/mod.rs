@@ -219,6 +219,15 @@ impl Joint {
         self.dofs.get(..usize::from(self.count)).unwrap_or(&[])
     }
 
+    /// All three DOF entries: the degrees of freedom in order, then the
+    /// unused entries, each about X with limits 0 (as every constructor
+    /// leaves them).
+    #[inline]
+    #[must_use]
+    pub(crate) const fn entries(&self) -> &[Dof; 3] {
+        &self.dofs
+    }
+
     /// The number of degrees of freedom.
     #[inline]
     #[must_use]
@@ -261,6 +270,7 @@ impl Joint {
     }
 
     /// `values` clamped to the limits; unused entries set to 0.
+    #[inline]
     #[must_use]
     pub fn clamp(&self, values: &[f32; 3]) -> [f32; 3] {
         // By count, as in `rotation` (no iterator calls at opt-level "s").

@@ -16,10 +16,9 @@
 //! keeps each joint's rotation with the angles it was computed at and
 //! computes it again only when they change (bit for bit the same numbers).
 
-use super::reach::bit;
-use super::slots::{Kind, MAX_GOALS, Slot, Slots};
-use super::{ReachTree, RootMode, SolveError, Solver, Work};
-use crate::body::{Axis, Segment};
+use super::slots::{Kind, Slot, Slots};
+use super::{RootMode, SolveError, Solver, Work};
+use crate::body::{Axis, Body, Segment};
 use crate::goal::Frame;
 use crate::math;
 use glam::{Mat3, Quat, Vec3};
@@ -194,8 +193,6 @@ pub(super) struct Joints<const N: usize> {
     nodes: usize,
     /// Bit `s`: segment `s` is in `order`.
     path: u64,
-    /// Bit `s`: segment `s`'s joint moves.
-    moving: u64,
     /// The root position before the step.
     back_root: Vec3,
     /// Bit `j`: slot `j` is not met; sets the live groups
@@ -227,7 +224,6 @@ impl<const N: usize> Joints<N> {
         order: [(0, 0, 0); N],
         nodes: 0,
         path: 0,
-        moving: 0,
         back_root: Vec3::ZERO,
         unmet: 0,
         reach: 0,
@@ -238,94 +234,71 @@ impl<const N: usize> Joints<N> {
     };
 
     /// Finds the groups that move for these goals, in segment order (the
-    /// translation first), in place of any it held.
-    pub fn init(
-        &mut self,
-        solver: &Solver,
-        tree: &ReachTree<N>,
-        work: &Work<'_, '_, N>,
-        slots: &Slots,
-    ) {
-        (self.count, self.nodes, self.path, self.moving) = (0, 0, 0, 0);
+    /// translation first), in place of any it held: the joints of the
+    /// segments that the goals and their frames hang from (the reach tree's
+    /// simple chains), strictly below the anchor: the body root
+    /// ([`RootMode::Fixed`]) or the goals' lowest common ancestor, the reach
+    /// tree's root ([`RootMode::Float`]). Found by climbing from each goal's
+    /// segment and frame segment, without building the tree.
+    pub fn init(&mut self, solver: &Solver, work: &Work<'_, '_, N>, slots: &Slots) {
+        (self.count, self.nodes, self.path) = (0, 0, 0);
         self.generation = self.generation.wrapping_add(1);
         if self.generation == 0 {
             // Wrapped: forget every entry for certain.
             (self.local, self.generation) = ([Local::NONE; N], 1);
         }
-        let masks = self.slot_masks(tree, work, slots);
-        let masks = masks.get(..slots.count).unwrap_or(&[]);
-        let anchor = match solver.root {
-            RootMode::Float => {
-                let (dep_a, dep_b) = deps(masks, u64::MAX);
-                self.push(Group {
-                    seg: TRANSLATION,
-                    count: 3,
-                    dep_a,
-                    dep_b,
-                    min: Vec3::NEG_INFINITY,
-                    max: Vec3::INFINITY,
-                    ..NO_GROUP
-                });
-                None
-            }
-            RootMode::Fixed => Some(0),
-        };
-        // Per segment, the slots whose point and whose frame it moves.
+        let body = work.body;
+        // Per segment, the slots whose point and whose frame it moves; and
+        // the slots with a point and with a frame.
         let mut moves = [(0u16, 0u16); N];
-        for (j, &(point, frame)) in masks.iter().enumerate() {
-            for (mut m, frame) in [(point, false), (frame, true)] {
-                while m != 0 {
-                    let s = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    if let Some(d) = moves.get_mut(s) {
-                        let d = if frame { &mut d.1 } else { &mut d.0 };
-                        *d |= 1 << j;
-                    }
-                }
-            }
-        }
-        // The path in segment order; a moving joint's group as it comes.
-        let mut path = self.path;
-        while path != 0 {
-            let s = path.trailing_zeros() as usize;
-            path &= path - 1;
-            let (Some(seg), Some(&deps)) = (work.body.segments.get(s), moves.get(s)) else {
+        let (mut dep_a, mut dep_b) = (0u16, 0u16);
+        for (j, slot) in slots.iter().enumerate() {
+            let Some(g) = work.goals.get(usize::from(slot.goal)) else {
                 continue;
             };
-            let group = if s > 0 && seg.joint.count() > 0 && tree.moves(s, anchor) {
-                self.moving |= bit(s);
-                self.push(joint_group(s, seg, deps))
-            } else {
-                FIXED
+            climb(body, usize::from(g.segment), (1 << j, 0), &mut moves);
+            dep_a |= 1 << j;
+            if let Frame::Segment(f) = g.frame {
+                climb(body, usize::from(f), (0, 1 << j), &mut moves);
+                dep_b |= 1 << j;
+            }
+        }
+        if solver.root == RootMode::Float {
+            self.push(Group {
+                seg: TRANSLATION,
+                count: 3,
+                dep_a,
+                dep_b,
+                min: Vec3::NEG_INFINITY,
+                max: Vec3::INFINITY,
+                ..NO_GROUP
+            });
+        }
+        // The path (the segments that move a slot) in segment order; a
+        // moving joint's group as it comes. The anchor and its ancestors move
+        // every slot's point and frame.
+        let mut at = 1u64;
+        for (s, (seg, &deps)) in body.segments.iter().zip(&moves).enumerate() {
+            let on_path = deps != (0, 0);
+            let above = match solver.root {
+                RootMode::Float => deps == (dep_a, dep_b),
+                RootMode::Fixed => s == 0,
             };
-            if let Some(o) = self.order.get_mut(self.nodes) {
-                let parent = if s == 0 { FIXED } else { seg.parent };
-                *o = (u8::try_from(s).unwrap_or(0), group, parent);
-                self.nodes += 1;
-            }
-        }
-    }
-
-    /// Per slot, the ancestry of its segment and of its frame segment; the
-    /// union of all of them is the path.
-    fn slot_masks(
-        &mut self,
-        tree: &ReachTree<N>,
-        work: &Work<'_, '_, N>,
-        slots: &Slots,
-    ) -> [(u64, u64); MAX_GOALS] {
-        let mut masks = [(0u64, 0u64); MAX_GOALS];
-        for (m, slot) in masks.iter_mut().zip(slots.iter()) {
-            if let Some(g) = work.goals.get(usize::from(slot.goal)) {
-                let frame = match g.frame {
-                    Frame::World => 0,
-                    Frame::Segment(f) => tree.ancestry(usize::from(f)),
+            if on_path {
+                let group = if !above && seg.joint.count() > 0 {
+                    self.push(joint_group(s, seg, deps))
+                } else {
+                    FIXED
                 };
-                *m = (tree.ancestry(usize::from(g.segment)), frame);
-                self.path |= m.0 | m.1;
+                if let Some(o) = self.order.get_mut(self.nodes) {
+                    let parent = if s == 0 { FIXED } else { seg.parent };
+                    *o = (u8::try_from(s).unwrap_or(0), group, parent);
+                    self.nodes += 1;
+                }
+                self.path |= at;
             }
+            at <<= 1;
         }
-        masks
     }
 
     /// Appends a group; returns its index ([`FIXED`] if there is no room).
@@ -429,44 +402,44 @@ impl<const N: usize> Joints<N> {
     }
 }
 
-/// The slots whose point (`.0`) and whose frame segment (`.1`) the joints of
-/// the segments in `b` move, given each slot's ancestry masks.
-fn deps(masks: &[(u64, u64)], b: u64) -> (u16, u16) {
-    masks
-        .iter()
-        .enumerate()
-        .fold((0u16, 0u16), |(a, f), (k, m)| {
-            (
-                if m.0 & b != 0 { a | 1 << k } else { a },
-                if m.1 & b != 0 { f | 1 << k } else { f },
-            )
-        })
+/// Adds the slot bits `(point, frame)` to the entries of `moves` of segment
+/// `s` and of its ancestors.
+fn climb<const N: usize>(
+    body: &Body<'_>,
+    s: usize,
+    (point, frame): (u16, u16),
+    moves: &mut [(u16, u16); N],
+) {
+    let mut at = Some(s);
+    while let Some(s) = at {
+        if let Some(d) = moves.get_mut(s) {
+            (d.0, d.1) = (d.0 | point, d.1 | frame);
+        }
+        // Parents come before children (checked): the climb ends.
+        at = body.parent(s).filter(|&p| p < s);
+    }
 }
 
-/// The group of segment `s`'s joint.
+/// The group of segment `s`'s joint (unused DOFs: about X, limits 0).
+#[inline]
 fn joint_group(s: usize, seg: &Segment<'_>, (dep_a, dep_b): (u16, u16)) -> Group {
-    let mut g = Group {
+    let [a, b, c] = seg.joint.entries();
+    Group {
         seg: u8::try_from(s).unwrap_or(0),
         parent: seg.parent,
-        offset: seg.origin,
+        count: u8::try_from(seg.joint.count()).unwrap_or(0),
+        axes: [a.axis, b.axis, c.axis],
+        start: 0,
+        len: 0,
         dep_a,
         dep_b,
-        ..NO_GROUP
-    };
-    let (mut min, mut max) = ([0.0f32; 3], [0.0f32; 3]);
-    for (((d, a), lo), hi) in seg
-        .joint
-        .dofs()
-        .iter()
-        .zip(&mut g.axes)
-        .zip(&mut min)
-        .zip(&mut max)
-    {
-        (*a, *lo, *hi) = (d.axis, d.min, d.max);
-        g.count += 1;
+        offset: seg.origin,
+        min: Vec3::new(a.min, b.min, c.min),
+        max: Vec3::new(a.max, b.max, c.max),
+        turn: (0.0, 0.0),
+        live: false,
+        moved: false,
     }
-    (g.min, g.max) = (Vec3::from_array(min), Vec3::from_array(max));
-    g
 }
 
 /// The links of group `g` in the link store.
@@ -558,7 +531,7 @@ impl<const N: usize> Joints<N> {
 
 /// The world placement of segment `s` (the root: its own) from its parent's
 /// and its joint's rotation at the current angles (kept in `cache`).
-#[inline]
+#[inline(always)]
 fn place_fixed<const N: usize>(
     work: &Work<'_, '_, N>,
     s: usize,
@@ -962,11 +935,10 @@ mod tests {
         let mut angles = a;
         let mut work = Work::new(&body, &goals, &mut angles, &mut pose);
         work.check().unwrap();
-        let tree = ReachTree::<32>::build(&body, &goals).unwrap();
         let mut slots = Slots::EMPTY;
         slots.init(&goals, 4.0).unwrap();
         let mut joints = Joints::<32>::EMPTY;
-        joints.init(&Solver::DEFAULT, &tree, &work, &slots);
+        joints.init(&Solver::DEFAULT, &work, &slots);
         joints.forward(&mut work);
         slots.evaluate(&work).unwrap();
         joints.settle(&slots, 0.0);

@@ -47,11 +47,11 @@
 //! 6.7 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
 //! meets all goals on 30 of 32 problems (chain DLS and CCD 25). On the
 //! emulated Cortex-M4F (instruction counts, not cycles), tree DLS takes about
-//! 112 k instructions cold ([`solve`], 3 iterations) and 68 k warm (goals
+//! 106 k instructions cold ([`solve`], 3 iterations) and 66 k warm (goals
 //! moved ≤ 2 cm, [`solve_with`] with the [`SolverState`] of the previous
-//! frame, 2 iterations) built at `opt-level = 3`, and 126 k and 75 k in the
+//! frame, 2 iterations) built at `opt-level = 3`, and 119 k and 73 k in the
 //! firmware's `opt-level = "s"` build. One iteration (at 3) is about 26 k: the columns and their
-//! sums 8.3 k, forward kinematics of the 20 segments the goals hang from 5 k,
+//! sums 8.3 k, forward kinematics of the 20 segments the goals hang from 4.8 k,
 //! the step and its limits 4.2 k (two rounds when a joint limit clamps), the
 //! 3×3 blocks and the damping 5.2 k, the factorisation 2.2 k, applying the
 //! step 1.8 k. The iteration count is set by the problem's curvature, not the
@@ -59,14 +59,16 @@
 //! 0.01 mm (ten times less damping: 11 mm, 0.6 mm, 0.01 mm; a chord step,
 //! the last linearisation reused for the new residuals, leaves far more
 //! than a new one: 12 → 3.3 mm, 0.8 → 0.14 mm); from goals 1.5 cm away
-//! 2 mm, then 0.02 mm. A fresh working state costs about 14 k before the
-//! first iteration (clearing 13.5 kB, the reach tree, the joint layout) and
-//! the first forward kinematics 5 k; a kept state skips the first three
-//! while the goals stay on the same segments, and a start at the last
-//! solution skips the sines and cosines of the first forward kinematics
-//! (each joint's rotation is kept with its angles), leaving about 2.5 k of
-//! it. The final pose and the report cost about 2.5 k. Fewer moving DOFs or
-//! goals cost proportionally less.
+//! 2 mm, then 0.02 mm. A fresh working state costs about 10.5 k before the
+//! first iteration (clearing its 13.5 kB 5 k, the joint layout 3 k, checking
+//! and clamping the angles 1.8 k) and the first forward kinematics 4.8 k; a
+//! kept state skips the clearing and the layout while the goals stay on the
+//! same segments, and a start at the last solution skips the sines and
+//! cosines of the first forward kinematics (each joint's rotation is kept
+//! with its angles), leaving about 2.5 k of it. The final pose (the 11
+//! segments off the goals' paths) and the report cost about 3.5 k, 2 k when
+//! their rotations are kept. Fewer moving DOFs or goals cost proportionally
+//! less.
 //!
 //! Tree DLS is a local method: on 100 random CMU goal sets (`tests/solve.rs`)
 //! it ends at a local optimum every time, and with [`Solver::restarts`] = 3
@@ -306,12 +308,13 @@ pub fn solve<const N: usize, const G: usize>(
 
 /// [`solve`] with a working state that the caller keeps between solves.
 ///
-/// The state is built in place on the first call and kept: the reach tree and
-/// the layout of the moving joints are reused as long as the same body (by
-/// address), method, root mode and active goals on the same segments and
-/// frames come back; goal targets, weights and kinds may change freely. The
-/// result is bit-identical to [`solve`]'s. After changing a body's contents
-/// in place (same address), call [`SolverState::reset`].
+/// The state is built in place on the first call and kept: the layout of the
+/// moving joints (tree DLS) or the reach tree (the balancing methods) is
+/// reused as long as the same body (by address), method, root mode and
+/// active goals on the same segments and frames come back; goal targets,
+/// weights and kinds may change freely. The result is bit-identical to
+/// [`solve`]'s. After changing a body's contents in place (same address),
+/// call [`SolverState::reset`].
 pub fn solve_with<const N: usize, const G: usize>(
     solver: &Solver,
     body: &Body<'_>,
@@ -326,19 +329,21 @@ pub fn solve_with<const N: usize, const G: usize>(
     let laid_out = layout.is_some() && state.layout == layout;
     // Valid again only once this solve has built what it needs.
     state.layout = None;
-    let tree = &mut state.tree;
-    if !laid_out {
-        *tree = ReachTree::EMPTY;
-        tree.fill(body, goals.as_slice())?;
-    }
-    let (iterations, converged) = if tree.is_empty() {
-        work.forward()?;
-        (0, true)
-    } else if solver.method == Method::TreeDls {
-        tree::solve(solver, tree, &mut state.lm, laid_out, &mut work)?
+    let (iterations, converged) = if solver.method == Method::TreeDls {
+        // Finds the reach tree's joints from the goals, without the tree.
+        tree::solve(solver, &mut state.lm, laid_out, &mut work)?
     } else {
+        let tree = &mut state.tree;
+        if !laid_out {
+            *tree = ReachTree::EMPTY;
+            tree.fill(body, goals.as_slice())?;
+        }
         work.forward()?;
-        balance::solve(solver, tree, &mut work)?
+        if tree.is_empty() {
+            (0, true)
+        } else {
+            balance::solve(solver, tree, &mut work)?
+        }
     };
     state.layout = layout;
     let mut report = Report {
@@ -347,12 +352,21 @@ pub fn solve_with<const N: usize, const G: usize>(
         residuals: [0.0; G],
         error: 0.0,
     };
+    // With an active goal, tree DLS leaves every active goal's residual at
+    // the final pose in its slots (in goal order): the same numbers as
+    // evaluating the goal again.
+    let slots = (solver.method == Method::TreeDls).then(|| state.lm.slots());
+    let mut kept = slots.into_iter().flat_map(|s| s.iter()).peekable();
     for ((r, g), i) in report.residuals.iter_mut().zip(goals.as_slice()).zip(0u8..) {
-        *r = g
-            .evaluate(body, work.pose)
-            .ok_or(SolveError::BadGoal(i))?
-            .magnitude();
-        if g.is_active() {
+        let active = g.is_active();
+        *r = match kept.next_if(|s| active && s.goal == i) {
+            Some(slot) => slot.magnitude(),
+            None => g
+                .evaluate(body, work.pose)
+                .ok_or(SolveError::BadGoal(i))?
+                .magnitude(),
+        };
+        if active {
             report.error += g.weight * *r * *r;
         }
     }
@@ -360,12 +374,13 @@ pub fn solve_with<const N: usize, const G: usize>(
 }
 
 /// The working state of [`solve_with`], kept by the caller between solves
-/// (a live loop keeps one per figure): the reach tree, the moving joints and
-/// their Jacobian columns, each joint's rotation with the angles it was
-/// computed at, the goal rows and the goal-space system. Sized by the body
-/// capacity `N`: about 280 bytes per segment of capacity plus 5 kB (13.5 kB
-/// for `N` = 31, 23 kB for `N` = 64). Nothing in it changes a result: a solve
-/// with a kept state is bit-identical to one with a new state.
+/// (a live loop keeps one per figure): the reach tree (of the balancing
+/// methods), the moving joints and their Jacobian columns, each joint's
+/// rotation with the angles it was computed at, the goal rows and the
+/// goal-space system. Sized by the body capacity `N`: about 280 bytes per
+/// segment of capacity plus 5 kB (13.5 kB for `N` = 31, 23 kB for `N` = 64).
+/// Nothing in it changes a result: a solve with a kept state is
+/// bit-identical to one with a new state.
 pub struct SolverState<const N: usize> {
     tree: ReachTree<N>,
     lm: tree::Lm<N>,
@@ -401,7 +416,7 @@ impl<const N: usize> Default for SolverState<N> {
 /// What the reach tree and the joint layout depend on: the body (by the
 /// addresses of its tables and its length), the method and root mode, and
 /// per active goal, in order, its segment and frame segment.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Eq)]
 struct Layout {
     body: [usize; 4],
     method: Method,
@@ -409,6 +424,17 @@ struct Layout {
     count: usize,
     /// Segment and frame segment (`u8::MAX`: the world) of each active goal.
     goals: [(u8, u8); MAX_GOALS],
+}
+
+impl PartialEq for Layout {
+    /// Field by field and word by word (the derived comparison is a call of
+    /// a byte-wise `memcmp` on the M4F).
+    fn eq(&self, other: &Self) -> bool {
+        let ([a, b, c, d], [e, f, g, h]) = (self.body, other.body);
+        (a, b, c, d) == (e, f, g, h)
+            && (self.method, self.root, self.count) == (other.method, other.root, other.count)
+            && self.goals.iter().zip(&other.goals).all(|(x, y)| x == y)
+    }
 }
 
 impl Layout {

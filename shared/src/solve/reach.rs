@@ -36,12 +36,13 @@ impl<const N: usize> ReachTree<N> {
         Ok(tree)
     }
 
-    /// An empty tree.
+    /// An empty tree (all zero bits: a new state is cleared, not copied;
+    /// nothing past `len` is read).
     pub(crate) const EMPTY: Self = ReachTree {
         len: 0,
         segment: [0; N],
-        parent: [NO_PARENT; N],
-        node_of: [NO_PARENT; N],
+        parent: [0; N],
+        node_of: [0; N],
         on_path: 0,
         ancestry: [0; N],
     };
@@ -52,6 +53,7 @@ impl<const N: usize> ReachTree<N> {
         if n > N {
             return Err(SolveError::Capacity);
         }
+        self.node_of = [NO_PARENT; N];
         let mut has_goal = [false; N];
         for (i, g) in goals.iter().enumerate().filter(|(_, g)| g.is_active()) {
             let bad = SolveError::BadGoal(u8::try_from(i).unwrap_or(u8::MAX));
@@ -166,8 +168,8 @@ impl<const N: usize> ReachTree<N> {
     pub fn node_of(&self, segment: usize) -> Option<usize> {
         self.node_of
             .get(segment)
-            .filter(|&&n| n != NO_PARENT)
             .map(|&n| usize::from(n))
+            .filter(|&n| n < self.len)
     }
 
     /// The root node's segment: the topmost node (the lowest common ancestor of
@@ -216,7 +218,7 @@ impl<const N: usize> ReachTree<N> {
 /// The bit of segment `s` in a 64-bit mask (0 beyond 63).
 #[inline(always)]
 #[must_use]
-pub fn bit(s: usize) -> u64 {
+fn bit(s: usize) -> u64 {
     if s < 64 { 1 << s } else { 0 }
 }
 

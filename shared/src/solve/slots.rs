@@ -3,7 +3,7 @@
 //! first), scaled by `√(w / w_max)`, and its geometry at the current pose.
 
 use super::{SolveError, Work};
-use crate::goal::{Frame, Goal, PlaneSide, Residual, Target};
+use crate::goal::{Frame, Goal, PlaneSide, Residual, Target, norm};
 use crate::math;
 use glam::Vec3;
 
@@ -178,6 +178,15 @@ impl Slots {
 }
 
 impl Slot {
+    /// The size of the residual: [`Residual::magnitude`] of the goal's
+    /// residual at the pose of the last refresh.
+    pub fn magnitude(&self) -> f32 {
+        match self.kind {
+            Kind::Plane => math::abs(self.r.x),
+            Kind::Point | Kind::Orientation => norm(self.r),
+        }
+    }
+
     /// Geometry and residual at the current pose; `None` on a bad index.
     fn refresh<const N: usize>(&mut self, goal: &Goal, work: &Work<'_, '_, N>) -> Option<()> {
         let (body, pose) = (work.body, &*work.pose);

@@ -39,7 +39,7 @@
 use super::joints::Joints;
 use super::slots::Slots;
 use super::system::System;
-use super::{ReachTree, SolveError, Solver, Work};
+use super::{SolveError, Solver, Work};
 use crate::math;
 
 pub use super::slots::MAX_GOALS;
@@ -67,16 +67,20 @@ impl<const N: usize> Lm<N> {
         slots: Slots::EMPTY,
         system: System::EMPTY,
     };
+
+    /// The active goals as [`solve`] left them: at its final pose, if it
+    /// returned with an active goal.
+    pub fn slots(&self) -> &Slots {
+        &self.slots
+    }
 }
 
 /// Weighted DLS over the whole reach tree; returns (iterations, converged).
 /// Leaves the full world pose of the result in `work`. With `laid_out`, the
-/// joints in `lm` are already those of `tree` for these goals (the same
-/// active goals on the same segments, the same body and root mode) and are
-/// not built again.
+/// joints in `lm` are already those of these goals (the same active goals on
+/// the same segments, the same body and root mode) and are not built again.
 pub(super) fn solve<const N: usize>(
     solver: &Solver,
-    tree: &ReachTree<N>,
     lm: &mut Lm<N>,
     laid_out: bool,
     work: &mut Work<'_, '_, N>,
@@ -92,7 +96,7 @@ pub(super) fn solve<const N: usize>(
     }
     lm.slots.init(work.goals, wmax)?;
     if !laid_out {
-        lm.joints.init(solver, tree, work, &lm.slots);
+        lm.joints.init(solver, work, &lm.slots);
         lm.system.forget();
     }
     let (mut iterations, mut converged) = lm.run(solver, work)?;
