@@ -350,14 +350,18 @@ impl<const N: usize> Joints<N> {
                 if keep {
                     d.back = Vec3::from_array(*values);
                 }
-                let limits = g.min.to_array().into_iter().zip(g.max.to_array());
-                for ((x, d), (min, max)) in values
-                    .iter_mut()
-                    .zip(d.delta.to_array())
-                    .zip(limits)
-                    .take(usize::from(g.count))
-                {
-                    *x = math::clamp(*x + d * scale, min, max);
+                // By count, without an iterator (opt-level "s").
+                let (step, [x, y, z]) = (d.delta * scale, *values);
+                let (lo, hi) = (g.min, g.max);
+                let count = g.count;
+                if count > 0 {
+                    values[0] = math::clamp(x + step.x, lo.x, hi.x);
+                }
+                if count > 1 {
+                    values[1] = math::clamp(y + step.y, lo.y, hi.y);
+                }
+                if count > 2 {
+                    values[2] = math::clamp(z + step.z, lo.z, hi.z);
                 }
             }
         }
