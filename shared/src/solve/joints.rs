@@ -321,7 +321,8 @@ impl<const N: usize> Joints<N> {
     /// values of the moving DOFs and the root position, to go back to with
     /// [`Joints::back`].
     pub fn apply(&mut self, work: &mut Work<'_, '_, N>, max_step: f32, keep: bool) {
-        let dofs = self.dofs.iter().take(self.count);
+        let n = self.count;
+        let dofs = self.dofs.get(..n).unwrap_or(&[]).iter();
         let biggest = dofs.fold(0.0f32, |m, d| math::max(d.delta.abs().max_element(), m));
         let scale = if biggest > max_step {
             max_step / biggest
@@ -331,12 +332,9 @@ impl<const N: usize> Joints<N> {
         if keep {
             self.back_root = work.angles.root_position;
         }
-        for (g, d) in self
-            .groups
-            .iter_mut()
-            .zip(self.dofs.iter_mut())
-            .take(self.count)
-        {
+        let groups = self.groups.get_mut(..n).unwrap_or(&mut []);
+        let dofs = self.dofs.get_mut(..n).unwrap_or(&mut []);
+        for (g, d) in groups.iter_mut().zip(dofs) {
             if !g.live {
                 continue;
             }
@@ -685,12 +683,10 @@ impl<const N: usize> Joints<N> {
     pub fn linearise(&mut self, work: &Work<'_, '_, N>, slots: &Slots) -> Result<(), SolveError> {
         let mut used = 0usize;
         let links = self.links.as_flattened_mut();
-        for (g, d) in self
-            .groups
-            .iter_mut()
-            .zip(self.dofs.iter_mut())
-            .take(self.count)
-        {
+        let n = self.count;
+        let groups = self.groups.get_mut(..n).unwrap_or(&mut []);
+        let dofs = self.dofs.get_mut(..n).unwrap_or(&mut []);
+        for (g, d) in groups.iter_mut().zip(dofs) {
             if !g.live {
                 // Held where it is: no links, no step.
                 (g.len, d.delta) = (0, Vec3::ZERO);

@@ -142,12 +142,10 @@ impl System {
         if !known {
             self.coupled = [0; MAX_GOALS];
         }
-        for (g, d) in joints
-            .groups
-            .iter()
-            .zip(joints.dofs.iter_mut())
-            .take(joints.count)
-        {
+        let count = joints.count;
+        let groups = joints.groups.get(..count).unwrap_or(&[]);
+        let dofs = joints.dofs.get_mut(..count).unwrap_or(&mut []);
+        for (g, d) in groups.iter().zip(dofs) {
             if !g.live {
                 continue;
             }
@@ -237,12 +235,10 @@ fn spread<const N: usize>(
     last: bool,
 ) -> bool {
     let mut clamped = false;
-    for (g, d) in joints
-        .groups
-        .iter()
-        .zip(joints.dofs.iter_mut())
-        .take(joints.count)
-    {
+    let count = joints.count;
+    let groups = joints.groups.get(..count).unwrap_or(&[]);
+    let dofs = joints.dofs.get_mut(..count).unwrap_or(&mut []);
+    for (g, d) in groups.iter().zip(dofs) {
         if !g.live {
             continue;
         }
