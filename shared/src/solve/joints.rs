@@ -694,11 +694,10 @@ impl<const N: usize> Joints<N> {
             }
             let (p, axes) = geometry(work, g);
             let v = Vec3::from_array(g.values(work));
-            *d = Dofs {
-                lo: g.min - v,
-                hi: g.max - v,
-                ..NO_DOFS
-            };
+            // `inv_d`, `delta` and `back` are set by the step.
+            (d.curvature, d.grad, d.tension, d.lever) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, 0.0);
+            (d.lo, d.hi) = (g.min - v, g.max - v);
+            let mut tense = false;
             g.start = u8::try_from(used).map_err(|_| SolveError::TooManyGoals)?;
             let mut bits = g.dep_a | g.dep_b;
             while bits != 0 {
@@ -715,13 +714,16 @@ impl<const N: usize> Joints<N> {
                     d.add(&link, slot.r * slot.sw, slot.sw * slot.sw);
                     if slot.stretched {
                         d.tension += t * (slot.sw * slot.sw);
+                        tense = true;
                     }
                 }
                 *links.get_mut(used).ok_or(SolveError::TooManyGoals)? = link;
                 used += 1;
             }
             g.len = u8::try_from(used - usize::from(g.start)).unwrap_or(0);
-            d.tension = d.tension.max(Vec3::ZERO);
+            if tense {
+                d.tension = d.tension.max(Vec3::ZERO);
+            }
         }
         Ok(())
     }
