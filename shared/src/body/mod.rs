@@ -76,7 +76,7 @@ impl Axis {
 
     /// `q · R(angle)`, the product with a rotation about this axis, in 8
     /// multiplications instead of a general quaternion product's 16.
-    #[inline]
+    #[inline(always)]
     #[must_use]
     pub fn rotate_after(self, q: Quat, angle: f32) -> Quat {
         let (s, c) = math::sin_cos(0.5 * angle);
@@ -84,7 +84,7 @@ impl Axis {
     }
 
     /// [`Axis::rotate_after`] from the sine and cosine of half the angle.
-    #[inline]
+    #[inline(always)]
     #[must_use]
     pub fn rotate_after_half(self, q: Quat, s: f32, c: f32) -> Quat {
         let (x, y, z, w) = (q.x, q.y, q.z, q.w);
