@@ -107,11 +107,13 @@ impl Local {
 /// step. And the group's lever: the sum of its goals' `w / w_max`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Dofs {
+    // The sums are set to zero per linearisation: kept apart by the limit
+    // steps, they are cleared by plain stores, not a call to `memclr`.
     pub curvature: Vec3,
-    pub grad: Vec3,
-    pub tension: Vec3,
     pub lo: Vec3,
+    pub grad: Vec3,
     pub hi: Vec3,
+    pub tension: Vec3,
     pub inv_d: Vec3,
     pub delta: Vec3,
     /// The values before the step.

@@ -128,17 +128,24 @@ impl System {
     /// Every DOF's damping ([`damp`]) and `J̃·D⁻¹·J̃ᵀ + I` over the DOFs
     /// that take part.
     fn assemble<const N: usize>(&mut self, joints: &mut Joints<N>, n: usize, lambda2: f32) {
-        for t in 0..n {
-            for s in 0..=t {
-                if let Some(b) = self.a.get_mut(at(t, s)) {
-                    *b = if s == t { Mat3::IDENTITY } else { Mat3::ZERO };
-                }
-            }
-        }
         // Which goals share a joint depends only on the layout and the
         // awake goals.
         let key = (self.awake, joints.unmet());
         let known = self.coupled_for == Some(key);
+        // The blocks the factorisation reads start at the identity (with a
+        // known coupling, only those: the others are never read).
+        for t in 0..n {
+            let row = self.coupled.get(t).copied().unwrap_or(0);
+            for s in 0..=t {
+                if let Some(b) = self.a.get_mut(at(t, s)) {
+                    if s == t {
+                        *b = Mat3::IDENTITY;
+                    } else if !known || row >> s & 1 != 0 {
+                        *b = Mat3::ZERO;
+                    }
+                }
+            }
+        }
         if !known {
             self.coupled = [0; MAX_GOALS];
         }
