@@ -384,27 +384,33 @@ fn outer(a: &mut [Mat3], links: &[Link], awake: u16, d: Vec3) {
     }
 }
 
+/// `1 / √x` ([`math::rsqrt`], whose special cases only `+∞` reaches here) of
+/// a pivot above 1e-20; `None` for a smaller one or NaN.
+#[inline(always)]
+fn pivot(x: f32) -> Option<f32> {
+    if x > 1e-20 {
+        Some(if x < f32::INFINITY {
+            math::rsqrt_normal(x)
+        } else {
+            0.0
+        })
+    } else {
+        None
+    }
+}
+
 /// Cholesky of a symmetric positive definite 3×3 matrix: the inverse of its
 /// lower factor, or `None`.
 fn chol3_inverse(m: Mat3) -> Option<Mat3> {
     let (a00, a10, a20) = (m.x_axis.x, m.x_axis.y, m.x_axis.z);
     let (a11, a21, a22) = (m.y_axis.y, m.y_axis.z, m.z_axis.z);
-    if a00 <= 1e-20 || a00.is_nan() {
-        return None;
-    }
-    let i00 = math::rsqrt(a00);
+    let i00 = pivot(a00)?;
     let (l10, l20) = (a10 * i00, a20 * i00);
     let d1 = a11 - l10 * l10;
-    if d1 <= 1e-20 || d1.is_nan() {
-        return None;
-    }
-    let i11 = math::rsqrt(d1);
+    let i11 = pivot(d1)?;
     let l21 = (a21 - l20 * l10) * i11;
     let d2 = a22 - l20 * l20 - l21 * l21;
-    if d2 <= 1e-20 || d2.is_nan() {
-        return None;
-    }
-    let i22 = math::rsqrt(d2);
+    let i22 = pivot(d2)?;
     // Inverse of L = [[l00,0,0],[l10,l11,0],[l20,l21,l22]] (lower, column-major below).
     let m10 = -l10 * i00 * i11;
     let m21 = -l21 * i11 * i22;
