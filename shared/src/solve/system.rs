@@ -124,8 +124,8 @@ impl System {
     fn solve<const N: usize>(&mut self, joints: &mut Joints<N>, n: usize, r: &mut Rhs) -> bool {
         let n = n.min(MAX_GOALS);
         for pass in 0..CLAMP_PASSES {
-            if !factor(&self.a, &mut self.l, &self.coupled, n)
-                || !substitute(&self.l, &self.coupled, n, r, &mut self.y)
+            if !factor(&self.a, &mut self.l, &self.coupled, n, r, &mut self.y)
+                || !substitute(&self.l, &self.coupled, n, &mut self.y)
             {
                 return false;
             }
@@ -422,18 +422,20 @@ fn chol3_inverse(m: Mat3) -> Option<Mat3> {
     ))
 }
 
-/// The block Cholesky factor of the packed lower block triangle `a` (`n`
+/// The block Cholesky factor `L` of the packed lower block triangle `a` (`n`
 /// block rows, only the blocks marked in `coupled` nonzero) into `l`: the
-/// factor's blocks where `coupled` marks them, the inverse on the diagonal.
-/// False if `A` is not numerically positive definite.
-fn factor(a: &[Mat3], l: &mut [Mat3], coupled: &Coupling, n: usize) -> bool {
+/// factor's blocks where `coupled` marks them, the inverse on the diagonal;
+/// and, row by row, the solution `z` of `L·z = b` into `y`. False if `A` is
+/// not numerically positive definite.
+fn factor(a: &[Mat3], l: &mut [Mat3], coupled: &Coupling, n: usize, b: &Rhs, y: &mut Rhs) -> bool {
     let mut rows = a;
     let mut start = 0;
     for s in 0..n {
-        let (Some((row_a, rest)), Some((done, tail)), Some(&cs)) = (
+        let (Some((row_a, rest)), Some((done, tail)), Some(&cs), Some((head, z))) = (
             rows.split_at_checked(s + 1),
             l.split_at_mut_checked(start),
             coupled.get(s),
+            y.split_at_mut_checked(s),
         ) else {
             return false;
         };
@@ -470,54 +472,37 @@ fn factor(a: &[Mat3], l: &mut [Mat3], coupled: &Coupling, n: usize) -> bool {
             };
             *x = acc * inv_kk.transpose();
         }
-        // Diagonal: L_ss·L_ssᵀ = A_ss − Σ_k L_sk·L_skᵀ; keep L_ss⁻¹.
-        let (Some((x, left)), Some(&ass)) = (row_s.split_last_mut(), row_a.get(s)) else {
+        // Diagonal: L_ss·L_ssᵀ = A_ss − Σ_k L_sk·L_skᵀ; keep L_ss⁻¹. And
+        // z_s = L_ss⁻¹·(b_s − Σ_k L_sk·z_k).
+        let (Some((x, left)), Some(&ass), Some(&bs), Some(zs)) = (
+            row_s.split_last_mut(),
+            row_a.get(s),
+            b.get(s),
+            z.first_mut(),
+        ) else {
             return false;
         };
-        let mut acc = ass;
+        let (mut acc, mut v) = (ass, bs);
         let mut bits = below;
         while bits != 0 {
             let k = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            if let Some(l) = left.get(k) {
+            if let (Some(l), Some(zk)) = (left.get(k), head.get(k)) {
                 acc -= *l * l.transpose();
+                v -= *l * *zk;
             }
         }
         let Some(inv) = chol3_inverse(acc) else {
             return false;
         };
-        *x = inv;
+        (*x, *zs) = (inv, inv * v);
     }
     true
 }
 
-/// Solves `L·Lᵀ·y = b` for the first `n` entries, with the factor `l` of
-/// [`factor`]: `L·z = b`, then `Lᵀ·y = z`.
-fn substitute(l: &[Mat3], coupled: &Coupling, n: usize, b: &Rhs, y: &mut Rhs) -> bool {
-    let mut rows = l;
-    for s in 0..n {
-        let (Some((row, rest)), Some((head, tail)), Some(&cs), Some(&bs)) = (
-            rows.split_at_checked(s + 1),
-            y.split_at_mut_checked(s),
-            coupled.get(s),
-            b.get(s),
-        ) else {
-            return false;
-        };
-        rows = rest;
-        let mut v = bs;
-        let mut bits = cs & ((1u16 << s) - 1);
-        while bits != 0 {
-            let k = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            if let (Some(l), Some(z)) = (row.get(k), head.get(k)) {
-                v -= *l * *z;
-            }
-        }
-        if let (Some(x), Some(inv)) = (tail.first_mut(), row.last()) {
-            *x = *inv * v;
-        }
-    }
+/// Solves `Lᵀ·y = z` in place for the first `n` entries, with the factor `l`
+/// and the `z` of [`factor`].
+fn substitute(l: &[Mat3], coupled: &Coupling, n: usize, y: &mut Rhs) -> bool {
     let Some(mut rows) = l.get(..at(n, 0)) else {
         return false;
     };
@@ -575,8 +560,8 @@ mod tests {
         let coupled = [0b01, 0b11, 0, 0, 0, 0, 0, 0, 0, 0];
         let mut l = [Mat3::ZERO; BLOCKS];
         let mut y: Rhs = [Vec3::ZERO; MAX_GOALS];
-        assert!(factor(&a, &mut l, &coupled, 2));
-        assert!(substitute(&l, &coupled, 2, &b, &mut y));
+        assert!(factor(&a, &mut l, &coupled, 2, &b, &mut y));
+        assert!(substitute(&l, &coupled, 2, &mut y));
         let r0 = a00 * y[0] + a10.transpose() * y[1] - b0;
         let r1 = a10 * y[0] + a11 * y[1] - b1;
         assert!(r0.length() < 1e-5 && r1.length() < 1e-5, "{r0} {r1}");
