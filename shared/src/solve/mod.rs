@@ -47,20 +47,20 @@
 //! 6.7 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
 //! meets all goals on 30 of 32 problems (chain DLS and CCD 25). On the
 //! emulated Cortex-M4F (instruction counts, not cycles), tree DLS takes about
-//! 106 k instructions cold ([`solve`], 3 iterations) and 66 k warm (goals
+//! 99 k instructions cold ([`solve`], 3 iterations) and 64 k warm (goals
 //! moved ≤ 2 cm, [`solve_with`] with the [`SolverState`] of the previous
-//! frame, 2 iterations) built at `opt-level = 3`, and 119 k and 73 k in the
-//! firmware's `opt-level = "s"` build. One iteration (at 3) is about 26 k: the columns and their
-//! sums 8.3 k, forward kinematics of the 20 segments the goals hang from 4.8 k,
-//! the step and its limits 4.2 k (two rounds when a joint limit clamps), the
-//! 3×3 blocks and the damping 5.2 k, the factorisation 2.2 k, applying the
-//! step 1.8 k. The iteration count is set by the problem's curvature, not the
+//! frame, 2 iterations) built at `opt-level = 3`, and 107 k and 69 k in the
+//! firmware's `opt-level = "s"` build. One iteration (at 3) is about 25 k:
+//! the columns and their sums 8.3 k, forward kinematics of the 20 segments
+//! the goals hang from 4.8 k, the step and its limits 4.2 k (two rounds when
+//! a joint limit clamps), the 3×3 blocks and the damping 5.2 k, the
+//! factorisation and the substitutions 1.3 k, applying the step 1.8 k. The iteration count is set by the problem's curvature, not the
 //! damping: from goals up to 10 cm away the steps leave 12 mm, 0.8 mm and
 //! 0.01 mm (ten times less damping: 11 mm, 0.6 mm, 0.01 mm; a chord step,
 //! the last linearisation reused for the new residuals, leaves far more
 //! than a new one: 12 → 3.3 mm, 0.8 → 0.14 mm); from goals 1.5 cm away
 //! 2 mm, then 0.02 mm. A fresh working state costs about 10.5 k before the
-//! first iteration (clearing its 13.5 kB 5 k, the joint layout 3 k, checking
+//! first iteration (clearing its 13.6 kB 5 k, the joint layout 3 k, checking
 //! and clamping the angles 1.8 k) and the first forward kinematics 4.8 k; a
 //! kept state skips the clearing and the layout while the goals stay on the
 //! same segments, and a start at the last solution skips the sines and
@@ -418,8 +418,9 @@ fn solve_in<const N: usize, const G: usize>(
 /// (a live loop keeps one per figure): the reach tree (of the balancing
 /// methods), the moving joints and their Jacobian columns, each joint's
 /// rotation with the angles it was computed at, the goal rows and the
-/// goal-space system. Sized by the body capacity `N`: about 280 bytes per
-/// segment of capacity plus 5 kB (13.5 kB for `N` = 31, 23 kB for `N` = 64).
+/// goal-space system. Sized by the body capacity `N`: about 286 bytes per
+/// segment of capacity plus 5.2 kB (14.0 kB for `N` = 31, 23.4 kB for `N` =
+/// 64).
 /// Nothing in it changes a result: a solve with a kept state is
 /// bit-identical to one with a new state.
 pub struct SolverState<const N: usize> {
