@@ -47,20 +47,20 @@
 //! 6.7 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
 //! meets all goals on 30 of 32 problems (chain DLS and CCD 25). On the
 //! emulated Cortex-M4F (instruction counts, not cycles), tree DLS takes about
-//! 106 k instructions cold ([`solve`], 3 iterations) and 66 k warm (goals
+//! 99 k instructions cold ([`solve`], 3 iterations) and 64 k warm (goals
 //! moved ≤ 2 cm, [`solve_with`] with the [`SolverState`] of the previous
-//! frame, 2 iterations) built at `opt-level = 3`, and 119 k and 73 k in the
-//! firmware's `opt-level = "s"` build. One iteration (at 3) is about 26 k: the columns and their
-//! sums 8.3 k, forward kinematics of the 20 segments the goals hang from 4.8 k,
-//! the step and its limits 4.2 k (two rounds when a joint limit clamps), the
-//! 3×3 blocks and the damping 5.2 k, the factorisation 2.2 k, applying the
-//! step 1.8 k. The iteration count is set by the problem's curvature, not the
+//! frame, 2 iterations) built at `opt-level = 3`, and 107 k and 69 k in the
+//! firmware's `opt-level = "s"` build. One iteration (at 3) is about 25 k:
+//! the columns and their sums 8.3 k, forward kinematics of the 20 segments
+//! the goals hang from 4.8 k, the step and its limits 4.2 k (two rounds when
+//! a joint limit clamps), the 3×3 blocks and the damping 5.2 k, the
+//! factorisation and the substitutions 1.3 k, applying the step 1.8 k. The iteration count is set by the problem's curvature, not the
 //! damping: from goals up to 10 cm away the steps leave 12 mm, 0.8 mm and
 //! 0.01 mm (ten times less damping: 11 mm, 0.6 mm, 0.01 mm; a chord step,
 //! the last linearisation reused for the new residuals, leaves far more
 //! than a new one: 12 → 3.3 mm, 0.8 → 0.14 mm); from goals 1.5 cm away
 //! 2 mm, then 0.02 mm. A fresh working state costs about 10.5 k before the
-//! first iteration (clearing its 13.5 kB 5 k, the joint layout 3 k, checking
+//! first iteration (clearing its 13.6 kB 5 k, the joint layout 3 k, checking
 //! and clamping the angles 1.8 k) and the first forward kinematics 4.8 k; a
 //! kept state skips the clearing and the layout while the goals stay on the
 //! same segments, and a start at the last solution skips the sines and
@@ -86,8 +86,9 @@
 //! ```
 //!
 //! The live loop ([`crate::frame::Performer`]) does this with the state its
-//! caller lends it. [`solve`] is the same with a fresh state (for `N` = 64, about 23 kB built
-//! on the stack per call).
+//! caller lends it. [`solve`] is the same with a fresh state, only the part
+//! its method keeps (tree DLS: for `N` = 64, about 22.7 kB built on the stack
+//! per call).
 
 mod balance;
 mod ccd;
@@ -293,9 +294,9 @@ fn bounded_goal(g: &Goal) -> bool {
 /// Positions the body: moves `angles` (the warm start) to meet `goals` as well as
 /// possible by their weights, and leaves the world pose of the result in `pose`.
 ///
-/// Builds its working state afresh (for `N` = 64, about 23 kB cleared); a
-/// loop that solves every frame keeps a [`SolverState`] and calls
-/// [`solve_with`] instead, with the same result.
+/// Builds afresh the part of a working state that its method keeps (tree DLS:
+/// for `N` = 64, about 22.7 kB cleared); a loop that solves every frame keeps
+/// a [`SolverState`] and calls [`solve_with`] instead, with the same result.
 pub fn solve<const N: usize, const G: usize>(
     solver: &Solver,
     body: &Body<'_>,
@@ -303,7 +304,16 @@ pub fn solve<const N: usize, const G: usize>(
     angles: &mut Angles<N>,
     pose: &mut Pose<N>,
 ) -> Result<Report<G>, SolveError> {
-    solve_with(solver, body, goals, angles, pose, &mut SolverState::new())
+    // Only the part of a state that the method keeps, cleared.
+    let (mut lm, mut tree);
+    let kept = if solver.method == Method::TreeDls {
+        lm = tree::Lm::EMPTY;
+        Kept::Lm(&mut lm)
+    } else {
+        tree = ReachTree::EMPTY;
+        Kept::Tree(&mut tree)
+    };
+    solve_in(solver, body, goals, angles, pose, kept, &mut None)
 }
 
 /// [`solve`] with a working state that the caller keeps between solves.
@@ -323,29 +333,60 @@ pub fn solve_with<const N: usize, const G: usize>(
     pose: &mut Pose<N>,
     state: &mut SolverState<N>,
 ) -> Result<Report<G>, SolveError> {
+    let kept = if solver.method == Method::TreeDls {
+        Kept::Lm(&mut state.lm)
+    } else {
+        Kept::Tree(&mut state.tree)
+    };
+    solve_in(solver, body, goals, angles, pose, kept, &mut state.layout)
+}
+
+/// The part of a [`SolverState`] that the solver's method keeps.
+enum Kept<'s, const N: usize> {
+    /// The balancing methods' reach tree.
+    Tree(&'s mut ReachTree<N>),
+    /// Tree DLS's moving joints, goal rows and system.
+    Lm(&'s mut tree::Lm<N>),
+}
+
+/// [`solve_with`] on the part of the state the method keeps (`kept`, built
+/// for `state_layout`).
+fn solve_in<const N: usize, const G: usize>(
+    solver: &Solver,
+    body: &Body<'_>,
+    goals: &GoalSet<G>,
+    angles: &mut Angles<N>,
+    pose: &mut Pose<N>,
+    kept: Kept<'_, N>,
+    state_layout: &mut Option<Layout>,
+) -> Result<Report<G>, SolveError> {
     let mut work = Work::new(body, goals.as_slice(), angles, pose);
     work.check()?;
     let layout = Layout::of(solver, body, goals.as_slice());
-    let laid_out = layout.is_some() && state.layout == layout;
+    let laid_out = layout.is_some() && *state_layout == layout;
     // Valid again only once this solve has built what it needs.
-    state.layout = None;
-    let (iterations, converged) = if solver.method == Method::TreeDls {
+    *state_layout = None;
+    let (iterations, converged, lm) = match kept {
         // Finds the reach tree's joints from the goals, without the tree.
-        tree::solve(solver, &mut state.lm, laid_out, &mut work)?
-    } else {
-        let tree = &mut state.tree;
-        if !laid_out {
-            *tree = ReachTree::EMPTY;
-            tree.fill(body, goals.as_slice())?;
+        Kept::Lm(lm) => {
+            let (iterations, converged) = tree::solve(solver, lm, laid_out, &mut work)?;
+            (iterations, converged, Some(lm))
         }
-        work.forward()?;
-        if tree.is_empty() {
-            (0, true)
-        } else {
-            balance::solve(solver, tree, &mut work)?
+        Kept::Tree(tree) => {
+            if !laid_out {
+                *tree = ReachTree::EMPTY;
+                tree.fill(body, goals.as_slice())?;
+            }
+            work.forward()?;
+            let (iterations, converged) = if tree.is_empty() {
+                (0, true)
+            } else {
+                balance::solve(solver, tree, &mut work)?
+            };
+            (iterations, converged, None)
         }
     };
-    state.layout = layout;
+    *state_layout = layout;
     let mut report = Report {
         iterations,
         converged,
@@ -355,7 +396,7 @@ pub fn solve_with<const N: usize, const G: usize>(
     // With an active goal, tree DLS leaves every active goal's residual at
     // the final pose in its slots (in goal order): the same numbers as
     // evaluating the goal again.
-    let slots = (solver.method == Method::TreeDls).then(|| state.lm.slots());
+    let slots = lm.map(|lm| lm.slots());
     let mut kept = slots.into_iter().flat_map(|s| s.iter()).peekable();
     for ((r, g), i) in report.residuals.iter_mut().zip(goals.as_slice()).zip(0u8..) {
         let active = g.is_active();
@@ -377,8 +418,9 @@ pub fn solve_with<const N: usize, const G: usize>(
 /// (a live loop keeps one per figure): the reach tree (of the balancing
 /// methods), the moving joints and their Jacobian columns, each joint's
 /// rotation with the angles it was computed at, the goal rows and the
-/// goal-space system. Sized by the body capacity `N`: about 280 bytes per
-/// segment of capacity plus 5 kB (13.5 kB for `N` = 31, 23 kB for `N` = 64).
+/// goal-space system. Sized by the body capacity `N`: about 286 bytes per
+/// segment of capacity plus 5.2 kB (14.0 kB for `N` = 31, 23.4 kB for `N` =
+/// 64).
 /// Nothing in it changes a result: a solve with a kept state is
 /// bit-identical to one with a new state.
 pub struct SolverState<const N: usize> {

@@ -45,6 +45,8 @@ pub(super) struct Slot {
     pub gap: f32,
     /// Unscaled residual (a plane's in `x`; zero while asleep).
     pub r: Vec3,
+    /// `r` before the step being tried ([`Slots::keep`]).
+    pub before: Vec3,
     /// The last accepted step left more than half of the residual.
     pub stretched: bool,
 }
@@ -60,6 +62,7 @@ const EMPTY_SLOT: Slot = Slot {
     n: Vec3::ZERO,
     gap: 0.0,
     r: Vec3::ZERO,
+    before: Vec3::ZERO,
     stretched: false,
 };
 
@@ -140,40 +143,38 @@ impl Slots {
             .fold(0, |m, (j, s)| if s.awake { m | 1 << j } else { m })
     }
 
-    /// The scaled residuals of the awake goals (zero for the others).
-    pub fn rhs(&self) -> Rhs {
-        let mut out = [Vec3::ZERO; MAX_GOALS];
+    /// The scaled residuals of the awake goals (zero for the others) in the
+    /// first [`Slots::count`] entries of `out` (the others are left as they
+    /// are).
+    pub fn rhs(&self, out: &mut Rhs) {
         for (o, slot) in out.iter_mut().zip(self.iter()) {
-            if slot.awake {
-                *o = slot.r * slot.sw;
-            }
-        }
-        out
-    }
-
-    /// The unscaled residuals.
-    pub fn residuals(&self) -> Rhs {
-        let mut out = [Vec3::ZERO; MAX_GOALS];
-        for (o, slot) in out.iter_mut().zip(self.iter()) {
-            *o = slot.r;
-        }
-        out
-    }
-
-    /// Marks the goals whose residual the last step (from `before`) did not
-    /// halve.
-    pub fn mark(&mut self, before: &Rhs) {
-        for (a, b) in self.s.iter_mut().zip(before).take(self.count) {
-            a.stretched = a.r.length_squared() > 0.25 * b.length_squared();
+            *o = if slot.awake {
+                slot.r * slot.sw
+            } else {
+                Vec3::ZERO
+            };
         }
     }
 
-    /// The largest change of any goal's residual (unscaled, squared) since
-    /// `before`.
-    pub fn moved(&self, before: &Rhs) -> f32 {
-        self.iter()
-            .zip(before)
-            .fold(0.0, |m, (a, b)| math::max((a.r - *b).length_squared(), m))
+    /// Keeps every goal's residual as the one before the next step.
+    pub fn keep(&mut self) {
+        for slot in self.s.iter_mut().take(self.count) {
+            slot.before = slot.r;
+        }
+    }
+
+    /// After an accepted step: marks the goals whose residual the step did
+    /// not halve, keeps the residuals for the next step and returns the
+    /// largest change of any goal's residual (unscaled, squared).
+    pub fn accept(&mut self) -> f32 {
+        let mut moved = 0.0;
+        for slot in self.s.iter_mut().take(self.count) {
+            let (r, before) = (slot.r, slot.before);
+            slot.stretched = r.length_squared() > 0.25 * before.length_squared();
+            moved = math::max((r - before).length_squared(), moved);
+            slot.before = r;
+        }
+        moved
     }
 }
 

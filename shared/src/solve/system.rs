@@ -41,7 +41,10 @@ const BLOCKS: usize = MAX_GOALS * (MAX_GOALS + 1) / 2;
 /// `(t, s)`, `s ≤ t`, at `t·(t+1)/2 + s`; and its factor.
 pub(super) struct System {
     a: [Mat3; BLOCKS],
+    /// The factor of `a` ([`factor`]).
     l: [Mat3; BLOCKS],
+    /// The solution `y` of a clamping round.
+    y: Rhs,
     /// Bit `s` of entry `t`: block `(t, s)` of the factor may be nonzero
     /// (the goals share a moving joint, or fill-in).
     coupled: Coupling,
@@ -67,6 +70,7 @@ impl System {
     pub const EMPTY: Self = System {
         a: [Mat3::ZERO; BLOCKS],
         l: [Mat3::ZERO; BLOCKS],
+        y: [Vec3::ZERO; MAX_GOALS],
         coupled: [0; MAX_GOALS],
         coupled_for: None,
         awake: 0,
@@ -78,47 +82,55 @@ impl System {
     }
 
     /// Computes the step (each group's `delta`) at damping `λ²` for the
-    /// linearisation in `joints` and the residuals in `slots`; false if the
-    /// system is singular.
+    /// linearisation in `joints` and the residuals in `slots` (scaled into
+    /// `r`, scratch kept by the caller, left less the motion of the DOFs held
+    /// at a limit); false if the system is singular.
     pub fn step<const N: usize>(
         &mut self,
         work: &Work<'_, '_, N>,
         joints: &mut Joints<N>,
         slots: &Slots,
+        r: &mut Rhs,
         lambda2: f32,
     ) -> bool {
-        let mut r = slots.rhs();
+        slots.rhs(r);
         self.awake = slots.awake() & joints.reach;
         for round in 0..2 {
             if round > 0 {
-                joints.sums(slots, self.awake, &r);
+                joints.sums(slots, self.awake, r);
             }
             self.assemble(joints, slots.count, lambda2);
-            if !self.solve(joints, slots.count, &r) {
+            if !self.solve(joints, slots.count, r) {
                 return false;
             }
-            if !self.wake(work, joints, slots, &mut r) {
+            let awake = self.awake;
+            if !self.wake(work, joints, slots, r) {
                 break;
+            }
+            // The residuals again where the clamping took out the motion of
+            // held DOFs (only the awake goals'; the woken ones are new).
+            for (j, (rj, slot)) in r.iter_mut().zip(slots.iter()).enumerate() {
+                if awake >> j & 1 != 0 {
+                    *rj = slot.r * slot.sw;
+                }
             }
         }
         true
     }
 
-    /// Solves for the step, clamping at the limits (a few rounds); false if
-    /// the matrix is singular.
-    fn solve<const N: usize>(&mut self, joints: &mut Joints<N>, n: usize, r: &Rhs) -> bool {
-        let mut target = *r;
-        let blocks = at(n, 0);
+    /// Solves for the step, clamping at the limits (a few rounds; the motion
+    /// of the DOFs held at a limit is taken out of `r`); false if the matrix
+    /// is singular.
+    fn solve<const N: usize>(&mut self, joints: &mut Joints<N>, n: usize, r: &mut Rhs) -> bool {
+        let n = n.min(MAX_GOALS);
         for pass in 0..CLAMP_PASSES {
-            for (l, a) in self.l.iter_mut().zip(&self.a).take(blocks) {
-                *l = *a;
-            }
-            let mut y = target;
-            if !block_cholesky_solve(&mut self.l, &self.coupled, n, &mut y) {
+            if !factor(&self.a, &mut self.l, &self.coupled, n, r, &mut self.y)
+                || !substitute(&self.l, &self.coupled, n, &mut self.y)
+            {
                 return false;
             }
             let last = pass + 1 == CLAMP_PASSES;
-            if !spread(joints, &mut self.a, self.awake, &y, &mut target, last) {
+            if !spread(joints, &mut self.a, self.awake, &self.y, r, last) {
                 break;
             }
         }
@@ -375,27 +387,33 @@ fn outer(a: &mut [Mat3], links: &[Link], awake: u16, d: Vec3) {
     }
 }
 
+/// `1 / √x` ([`math::rsqrt`], whose special cases only `+∞` reaches here) of
+/// a pivot above 1e-20; `None` for a smaller one or NaN.
+#[inline(always)]
+fn pivot(x: f32) -> Option<f32> {
+    if x > 1e-20 {
+        Some(if x < f32::INFINITY {
+            math::rsqrt_normal(x)
+        } else {
+            0.0
+        })
+    } else {
+        None
+    }
+}
+
 /// Cholesky of a symmetric positive definite 3×3 matrix: the inverse of its
 /// lower factor, or `None`.
 fn chol3_inverse(m: Mat3) -> Option<Mat3> {
     let (a00, a10, a20) = (m.x_axis.x, m.x_axis.y, m.x_axis.z);
     let (a11, a21, a22) = (m.y_axis.y, m.y_axis.z, m.z_axis.z);
-    if a00 <= 1e-20 || a00.is_nan() {
-        return None;
-    }
-    let i00 = math::rsqrt(a00);
+    let i00 = pivot(a00)?;
     let (l10, l20) = (a10 * i00, a20 * i00);
     let d1 = a11 - l10 * l10;
-    if d1 <= 1e-20 || d1.is_nan() {
-        return None;
-    }
-    let i11 = math::rsqrt(d1);
+    let i11 = pivot(d1)?;
     let l21 = (a21 - l20 * l10) * i11;
     let d2 = a22 - l20 * l20 - l21 * l21;
-    if d2 <= 1e-20 || d2.is_nan() {
-        return None;
-    }
-    let i22 = math::rsqrt(d2);
+    let i22 = pivot(d2)?;
     // Inverse of L = [[l00,0,0],[l10,l11,0],[l20,l21,l22]] (lower, column-major below).
     let m10 = -l10 * i00 * i11;
     let m21 = -l21 * i11 * i22;
@@ -407,93 +425,109 @@ fn chol3_inverse(m: Mat3) -> Option<Mat3> {
     ))
 }
 
-/// Solves `A·y = b` for the packed lower block triangle `a` (`n` block
-/// rows, only the blocks marked in `coupled` nonzero), overwriting `a` with
-/// the factor (inverse diagonal blocks) and `b` with `y`. False if `A` is not
-/// numerically positive definite.
-fn block_cholesky_solve(a: &mut [Mat3], coupled: &Coupling, n: usize, b: &mut Rhs) -> bool {
-    let n = n.min(MAX_GOALS);
+/// The block Cholesky factor `L` of the packed lower block triangle `a` (`n`
+/// block rows, only the blocks marked in `coupled` nonzero) into `l`: the
+/// factor's blocks where `coupled` marks them, the inverse on the diagonal;
+/// and, row by row, the solution `z` of `L·z = b` into `y`. False if `A` is
+/// not numerically positive definite.
+fn factor(a: &[Mat3], l: &mut [Mat3], coupled: &Coupling, n: usize, b: &Rhs, y: &mut Rhs) -> bool {
+    let mut rows = a;
+    let mut start = 0;
     for s in 0..n {
-        let Some((done, rest)) = a.split_at_mut_checked(at(s, 0)) else {
+        let (Some((row_a, rest)), Some((done, tail)), Some(&cs), Some((head, z))) = (
+            rows.split_at_checked(s + 1),
+            l.split_at_mut_checked(start),
+            coupled.get(s),
+            y.split_at_mut_checked(s),
+        ) else {
             return false;
         };
-        let (Some(row_s), Some(&cs)) = (rest.get_mut(..=s), coupled.get(s)) else {
+        rows = rest;
+        start += s + 1;
+        let Some(row_s) = tail.get_mut(..=s) else {
             return false;
         };
         // Off-diagonal blocks of row s: L_sk = (A_sk − Σ_{j<k} L_sj·L_kjᵀ)·L_kk⁻ᵀ.
-        for k in (0..s).filter(|&k| cs >> k & 1 != 0) {
-            let (Some(row_k), Some((left, tail)), Some(&ck)) = (
+        let below = cs & ((1u16 << s) - 1);
+        let mut bits = below;
+        while bits != 0 {
+            let k = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let (Some(row_k), Some((left, x)), Some(&ck), Some(&ask)) = (
                 done.get(at(k, 0)..=at(k, k)),
                 row_s.split_at_mut_checked(k),
                 coupled.get(k),
+                row_a.get(k),
             ) else {
                 return false;
             };
-            let mut acc = tail.first().copied().unwrap_or(Mat3::ZERO);
-            let both = cs & ck;
-            for (j, (lsj, lkj)) in left.iter().zip(row_k).enumerate() {
-                if both >> j & 1 != 0 {
+            let mut acc = ask;
+            let mut both = cs & ck & ((1u16 << k) - 1);
+            while both != 0 {
+                let j = both.trailing_zeros() as usize;
+                both &= both - 1;
+                if let (Some(lsj), Some(lkj)) = (left.get(j), row_k.get(j)) {
                     acc -= *lsj * lkj.transpose();
                 }
             }
-            let inv_kk = row_k.last().copied().unwrap_or(Mat3::ZERO);
-            if let Some(x) = tail.first_mut() {
-                *x = acc * inv_kk.transpose();
-            }
+            let (Some(x), Some(inv_kk)) = (x.first_mut(), row_k.last()) else {
+                return false;
+            };
+            *x = acc * inv_kk.transpose();
         }
-        // Diagonal: L_ss·L_ssᵀ = A_ss − Σ_k L_sk·L_skᵀ; keep L_ss⁻¹.
-        let Some((x, left)) = row_s.split_last_mut() else {
+        // Diagonal: L_ss·L_ssᵀ = A_ss − Σ_k L_sk·L_skᵀ; keep L_ss⁻¹. And
+        // z_s = L_ss⁻¹·(b_s − Σ_k L_sk·z_k).
+        let (Some((x, left)), Some(&ass), Some(&bs), Some(zs)) = (
+            row_s.split_last_mut(),
+            row_a.get(s),
+            b.get(s),
+            z.first_mut(),
+        ) else {
             return false;
         };
-        let mut acc = *x;
-        for (k, l) in left.iter().enumerate() {
-            if cs >> k & 1 != 0 {
+        let (mut acc, mut v) = (ass, bs);
+        let mut bits = below;
+        while bits != 0 {
+            let k = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            if let (Some(l), Some(zk)) = (left.get(k), head.get(k)) {
                 acc -= *l * l.transpose();
+                v -= *l * *zk;
             }
         }
         let Some(inv) = chol3_inverse(acc) else {
             return false;
         };
-        *x = inv;
+        (*x, *zs) = (inv, inv * v);
     }
-    substitute(a, coupled, n, b)
+    true
 }
 
-/// `L·z = b`, then `Lᵀ·y = z`, for the factor of [`block_cholesky_solve`].
-fn substitute(a: &[Mat3], coupled: &Coupling, n: usize, b: &mut Rhs) -> bool {
-    for s in 0..n {
-        let (Some(row), Some((head, tail)), Some(&cs)) = (
-            a.get(at(s, 0)..=at(s, s)),
-            b.split_at_mut_checked(s),
-            coupled.get(s),
-        ) else {
-            return false;
-        };
-        let mut v = tail.first().copied().unwrap_or(Vec3::ZERO);
-        for (k, (l, z)) in row.iter().zip(head.iter()).enumerate() {
-            if cs >> k & 1 != 0 {
-                v -= *l * *z;
-            }
-        }
-        if let (Some(x), Some(inv)) = (tail.first_mut(), row.last()) {
-            *x = *inv * v;
-        }
-    }
+/// Solves `Lᵀ·y = z` in place for the first `n` entries, with the factor `l`
+/// and the `z` of [`factor`].
+fn substitute(l: &[Mat3], coupled: &Coupling, n: usize, y: &mut Rhs) -> bool {
+    let Some(mut rows) = l.get(..at(n, 0)) else {
+        return false;
+    };
     for s in (0..n).rev() {
-        let (Some(row), Some((head, tail)), Some(&cs)) = (
-            a.get(at(s, 0)..=at(s, s)),
-            b.split_at_mut_checked(s),
+        let (Some((rest, row)), Some((head, tail)), Some(&cs)) = (
+            rows.split_at_checked(at(s, 0)),
+            y.split_at_mut_checked(s),
             coupled.get(s),
         ) else {
             return false;
         };
+        rows = rest;
         let (Some(x), Some(inv)) = (tail.first_mut(), row.last()) else {
             return false;
         };
         *x = inv.transpose() * *x;
         let ys = *x;
-        for (k, (bk, l)) in head.iter_mut().zip(row.iter()).enumerate() {
-            if cs >> k & 1 != 0 {
+        let mut bits = cs & ((1u16 << s) - 1);
+        while bits != 0 {
+            let k = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            if let (Some(bk), Some(l)) = (head.get_mut(k), row.get(k)) {
                 *bk -= l.transpose() * ys;
             }
         }
@@ -523,15 +557,14 @@ mod tests {
         a[at(1, 1)] = a11;
         let b0 = Vec3::new(1.0, -2.0, 0.5);
         let b1 = Vec3::new(0.25, 3.0, -1.0);
+        let mut b: Rhs = [Vec3::ZERO; MAX_GOALS];
+        b[0] = b0;
+        b[1] = b1;
+        let coupled = [0b01, 0b11, 0, 0, 0, 0, 0, 0, 0, 0];
+        let mut l = [Mat3::ZERO; BLOCKS];
         let mut y: Rhs = [Vec3::ZERO; MAX_GOALS];
-        y[0] = b0;
-        y[1] = b1;
-        assert!(block_cholesky_solve(
-            &mut a,
-            &[0b01, 0b11, 0, 0, 0, 0, 0, 0, 0, 0],
-            2,
-            &mut y
-        ));
+        assert!(factor(&a, &mut l, &coupled, 2, &b, &mut y));
+        assert!(substitute(&l, &coupled, 2, &mut y));
         let r0 = a00 * y[0] + a10.transpose() * y[1] - b0;
         let r1 = a10 * y[0] + a11 * y[1] - b1;
         assert!(r0.length() < 1e-5 && r1.length() < 1e-5, "{r0} {r1}");

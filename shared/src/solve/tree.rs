@@ -37,7 +37,7 @@
 //! joints' ranges, and the lowest error wins.
 
 use super::joints::Joints;
-use super::slots::Slots;
+use super::slots::{Rhs, Slots};
 use super::system::System;
 use super::{SolveError, Solver, Work};
 use crate::math;
@@ -58,6 +58,8 @@ pub(super) struct Lm<const N: usize> {
     joints: Joints<N>,
     slots: Slots,
     system: System,
+    /// Scratch of [`System::step`]: the scaled residuals.
+    rhs: Rhs,
 }
 
 impl<const N: usize> Lm<N> {
@@ -66,6 +68,7 @@ impl<const N: usize> Lm<N> {
         joints: Joints::EMPTY,
         slots: Slots::EMPTY,
         system: System::EMPTY,
+        rhs: [glam::Vec3::ZERO; MAX_GOALS],
     };
 
     /// The active goals as [`solve`] left them: at its final pose, if it
@@ -126,6 +129,7 @@ impl<const N: usize> Lm<N> {
     ) -> Result<(u32, bool), SolveError> {
         self.joints.unplaced();
         self.refresh(work)?;
+        self.slots.keep();
         let tol2 = solver.tolerance * solver.tolerance;
         let mut lambda = math::max(MIN_DAMPING, solver.damping);
         let mut fresh = true;
@@ -140,26 +144,30 @@ impl<const N: usize> Lm<N> {
                 self.joints.linearise(work, &self.slots)?;
                 fresh = false;
             }
-            if !self
-                .system
-                .step(work, &mut self.joints, &self.slots, lambda * lambda)
-            {
+            if !self.system.step(
+                work,
+                &mut self.joints,
+                &self.slots,
+                &mut self.rhs,
+                lambda * lambda,
+            ) {
                 lambda *= 4.0;
                 continue;
             }
-            let (before, error) = (self.slots.residuals(), self.slots.error);
+            let error = self.slots.error;
             self.trial(solver, work)?;
             if self.slots.error < error {
-                self.slots.mark(&before);
+                let moved = self.slots.accept();
                 fresh = true;
                 lambda = math::max(MIN_DAMPING, lambda / 3.0);
                 let gained = error - self.slots.error;
-                if self.slots.moved(&before) <= tol2 || gained <= self.slots.weight * tol2 {
+                if moved <= tol2 || gained <= self.slots.weight * tol2 {
                     return Ok((iterations, true));
                 }
             } else {
                 self.joints.back(work);
                 self.refresh(work)?;
+                self.slots.keep();
                 lambda *= 4.0;
                 if lambda > MAX_DAMPING {
                     return Ok((iterations, true));
