@@ -46,29 +46,33 @@
 //! tree DLS all meet every goal to [`Solver::DEFAULT`]'s 0.1 mm, in 68, 19 and
 //! 6.7 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
 //! meets all goals on 30 of 32 problems (chain DLS and CCD 25). On the
-//! emulated Cortex-M4F (instruction counts, not cycles), tree DLS takes about
-//! 99 k instructions cold ([`solve`], 3 iterations) and 64 k warm (goals
-//! moved ≤ 2 cm, [`solve_with`] with the [`SolverState`] of the previous
-//! frame, 2 iterations) built at `opt-level = 3`, and 107 k and 69 k in the
-//! firmware's `opt-level = "s"` build. One iteration (at 3) is about 25 k:
-//! the columns and their sums 8.3 k, forward kinematics of the 20 segments
-//! the goals hang from 4.8 k, the step and its limits 4.2 k (two rounds when
-//! a joint limit clamps), the 3×3 blocks and the damping 5.2 k, the
-//! factorisation and the substitutions 1.3 k, applying the step 1.8 k. The iteration count is set by the problem's curvature, not the
-//! damping: from goals up to 10 cm away the steps leave 12 mm, 0.8 mm and
-//! 0.01 mm (ten times less damping: 11 mm, 0.6 mm, 0.01 mm; a chord step,
-//! the last linearisation reused for the new residuals, leaves far more
-//! than a new one: 12 → 3.3 mm, 0.8 → 0.14 mm); from goals 1.5 cm away
-//! 2 mm, then 0.02 mm. A fresh working state costs about 10.5 k before the
-//! first iteration (clearing its 13.6 kB 5 k, the joint layout 3 k, checking
-//! and clamping the angles 1.8 k) and the first forward kinematics 4.8 k; a
-//! kept state skips the clearing and the layout while the goals stay on the
-//! same segments, and a start at the last solution skips the sines and
-//! cosines of the first forward kinematics (each joint's rotation is kept
-//! with its angles), leaving about 2.5 k of it. The final pose (the 11
-//! segments off the goals' paths) and the report cost about 3.5 k, 2 k when
-//! their rotations are kept. Fewer moving DOFs or goals cost proportionally
-//! less.
+//! emulated Cortex-M4F (instruction counts, not cycles, in the firmware's
+//! `opt-level = "s"` build), tree DLS takes about 97 k instructions cold
+//! ([`solve`], 3 iterations) and 63 k warm (goals moved ≤ 2 cm, [`solve_with`]
+//! with the [`SolverState`] of the previous frame, 2 iterations). One
+//! iteration moving all 19 joints costs about 25 k: the columns and their
+//! sums 7 k, forward kinematics of the 20 segments the goals hang from 5.3 k,
+//! the 3×3 blocks and the damping 4.5 k, the step and its limits 4 k (two
+//! rounds when a joint limit clamps), applying the step 1.7 k, the
+//! factorisation and the substitutions 1 k, the bookkeeping 2 k; an
+//! iteration after the feet are met moves only the arms and the spine. The
+//! iteration count is set by the problem's curvature, not the damping: from
+//! goals up to 10 cm away the steps leave 12 mm, 0.8 mm and 0.01 mm (ten
+//! times less damping: 11 mm, 0.6 mm, 0.01 mm; a chord step, the last
+//! linearisation reused for the new residuals, leaves far more than a new
+//! one: 12 → 3.3 mm, 0.8 → 0.14 mm); from goals 1.2 cm away the hands are
+//! left 1.5 and 1.7 mm away, then 0.03 mm. That first step's own linear
+//! model misses the hands by 2.5 mm (measured along the step), and an
+//! undamped minimum-norm Gauss–Newton step in `f64` from the same start
+//! leaves them 2.9 and 4.7 mm away: a 2 cm move needs two iterations. A fresh working state
+//! costs about 9.5 k before the first iteration (clearing its 13.6 kB 4.8 k,
+//! the joint layout 2.8 k, checking and clamping the angles 1.9 k) and the
+//! first forward kinematics 5.3 k; a kept state skips the clearing and the
+//! layout while the goals stay on the same segments, and a start at the last
+//! solution skips the sines and cosines of the first forward kinematics
+//! (each joint's rotation is kept with its angles), leaving about 2.5 k of
+//! it. The final pose (the 11 segments off the goals' paths) and the report
+//! cost about 2.5 k. Fewer moving DOFs or goals cost proportionally less.
 //!
 //! Tree DLS is a local method: on 100 random CMU goal sets (`tests/solve.rs`)
 //! it ends at a local optimum every time, and with [`Solver::restarts`] = 3
