@@ -277,8 +277,13 @@ fn spread<const N: usize>(
             continue;
         }
         // Move to the limit, hold there, solve the rest for what is left.
-        let over = |id: f32, x: f32, lo: f32, hi: f32| id != 0.0 && (x > hi || x < lo);
         let (x, lo, hi, id) = (d.delta, d.lo, d.hi, d.inv_d);
+        let inside = |x: f32, lo: f32, hi: f32| x <= hi && x >= lo;
+        if inside(x.x, lo.x, hi.x) && inside(x.y, lo.y, hi.y) && inside(x.z, lo.z, hi.z) {
+            // Mostly so: nothing crosses a limit.
+            continue;
+        }
+        let over = |id: f32, x: f32, lo: f32, hi: f32| id != 0.0 && (x > hi || x < lo);
         let out = Vec3::new(
             if over(id.x, x.x, lo.x, hi.x) {
                 id.x
