@@ -47,12 +47,12 @@
 //! and 5.2 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
 //! meets all goals on 30 of 32 problems (chain DLS and CCD 25). On the
 //! emulated Cortex-M4F (instruction counts, not cycles, in the firmware's
-//! `opt-level = "s"` build), tree DLS takes about 97 k instructions cold
-//! ([`solve`], 3 iterations) and 63 k warm (goals moved ≤ 2 cm, [`solve_with`]
+//! `opt-level = "s"` build), tree DLS takes about 95 k instructions cold
+//! ([`solve`], 3 iterations) and 61 k warm (goals moved ≤ 2 cm, [`solve_with`]
 //! with the [`SolverState`] of the previous frame, 2 iterations). One
-//! iteration moving all 19 joints costs about 25 k: the columns and their
+//! iteration moving all 19 joints costs about 24 k: the columns and their
 //! sums 7 k, forward kinematics of the 20 segments the goals hang from 5.3 k,
-//! the 3×3 blocks and the damping 4.5 k, the step and its limits 4 k (two
+//! the 3×3 blocks and the damping 4.5 k, the step and its limits 3.2 k (two
 //! rounds when a joint limit clamps), applying the step 1.7 k, the
 //! factorisation and the substitutions 1 k, the bookkeeping 2 k; an
 //! iteration after the feet are met moves only the arms and the spine. The
