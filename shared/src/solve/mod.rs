@@ -43,8 +43,8 @@
 //! start (goals ≤ 3 cm from a reachable pose): the greedy chain solver leaves
 //! goals 48 mm away on average (the triangle rule swings the whole spine and
 //! then hits limits: the "local minima" the paper warns of); CCD, chain DLS and
-//! tree DLS all meet every goal to [`Solver::DEFAULT`]'s 0.1 mm, in 56, 15.5
-//! and 5.2 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
+//! tree DLS all meet every goal to [`Solver::DEFAULT`]'s 0.1 mm, in 55, 14.5
+//! and 4.9 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
 //! meets all goals on 30 of 32 problems (chain DLS and CCD 25). On the
 //! emulated Cortex-M4F (instruction counts, not cycles, in the firmware's
 //! `opt-level = "s"` build), tree DLS takes about 95 k instructions cold
