@@ -330,6 +330,13 @@ pub fn sin_cos(x: f32) -> (f32, f32) {
     if !(abs(x) < f32::INFINITY) {
         return (f32::NAN, f32::NAN);
     }
+    sin_cos_reduced(x)
+}
+
+/// [`sin_cos`] of a finite `x` by the range reduction to `[−π/4, π/4]` and
+/// the quadrant.
+#[inline]
+fn sin_cos_reduced(x: f32) -> (f32, f32) {
     let (r, q) = reduce_pio2(x);
     let s = sin_poly(r);
     let c = cos_poly(r);
@@ -1162,18 +1169,6 @@ mod tests {
         assert_eq!(sqrt(-0.0).to_bits(), (-0.0f32).to_bits());
         assert_eq!(sqrt(f32::INFINITY), f32::INFINITY);
         assert!(sqrt(-1.0).is_nan() && sqrt(f32::NAN).is_nan());
-    }
-
-    /// The reduced path of [`sin_cos`], without the fast path.
-    fn sin_cos_reduced(x: f32) -> (f32, f32) {
-        let (r, q) = reduce_pio2(x);
-        let (s, c) = (sin_poly(r), cos_poly(r));
-        match q {
-            0 => (s, c),
-            1 => (c, -s),
-            2 => (-s, -c),
-            _ => (-c, s),
-        }
     }
 
     /// The fast path of [`sin_cos`] (`|x| ≤` [`SIN_COS_DIRECT`]) gives the

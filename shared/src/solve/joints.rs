@@ -370,12 +370,13 @@ impl<const N: usize> Joints<N> {
     /// Goes back to the values [`Joints::apply`] kept.
     pub fn back(&mut self, work: &mut Work<'_, '_, N>) {
         work.angles.root_position = self.back_root;
-        self.root_moved = true;
         for (d, g) in self.dofs.iter().zip(&mut self.groups).take(self.count) {
             if !g.live {
                 continue;
             }
             g.moved = true;
+            // The root moved only if the (live) translation did.
+            self.root_moved |= g.translation();
             if let Some(x) = work.angles.get_mut(usize::from(g.seg)) {
                 *x = d.back.to_array();
             }
@@ -671,6 +672,18 @@ impl<const N: usize> Joints<N> {
             }
         }
         (self.unmet, self.reach) = (unmet, reach);
+    }
+
+    /// The groups in use, their DOFs' state and the link store, borrowed
+    /// apart (the step reads the groups and links and writes the DOFs).
+    #[inline(always)]
+    pub fn parts(&mut self) -> (&[Group], &mut [Dofs], &[[Link; 2]]) {
+        let count = self.count;
+        (
+            self.groups.get(..count).unwrap_or(&[]),
+            self.dofs.get_mut(..count).unwrap_or(&mut []),
+            &self.links,
+        )
     }
 
     /// The goals that are not met ([`Joints::settle`]): with the layout,

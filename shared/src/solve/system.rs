@@ -161,15 +161,13 @@ impl System {
         if !known {
             self.coupled = [0; MAX_GOALS];
         }
-        let count = joints.count;
-        let groups = joints.groups.get(..count).unwrap_or(&[]);
-        let dofs = joints.dofs.get_mut(..count).unwrap_or(&mut []);
+        let (groups, dofs, links) = joints.parts();
         for (g, d) in groups.iter().zip(dofs) {
             if !g.live {
                 continue;
             }
             damp(d, lambda2);
-            let links = links_of(&joints.links, g);
+            let links = links_of(links, g);
             outer(&mut self.a, links, self.awake, d.inv_d);
             if !known {
                 couple(&mut self.coupled, links, self.awake);
@@ -254,14 +252,12 @@ fn spread<const N: usize>(
     last: bool,
 ) -> bool {
     let mut clamped = false;
-    let count = joints.count;
-    let groups = joints.groups.get(..count).unwrap_or(&[]);
-    let dofs = joints.dofs.get_mut(..count).unwrap_or(&mut []);
+    let (groups, dofs, links) = joints.parts();
     for (g, d) in groups.iter().zip(dofs) {
         if !g.live {
             continue;
         }
-        let links = links_of(&joints.links, g);
+        let links = links_of(links, g);
         let mut cy = Vec3::ZERO;
         for l in links.iter().filter(|l| awake >> l.slot & 1 != 0) {
             cy += l.cols.transpose() * y.get(usize::from(l.slot)).copied().unwrap_or(Vec3::ZERO);
