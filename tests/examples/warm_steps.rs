@@ -121,25 +121,11 @@ fn problem(k: u32, warm: bool) -> Problem {
     }
 }
 
-fn get(v: &Var, s: &RefState) -> f64 {
-    match *v {
-        Var::Dof { seg, k, .. } => s.angles[seg][k],
-        Var::Translation(k) => s.root[k],
-    }
-}
-
-fn set(v: &Var, s: &mut RefState, x: f64) {
-    match *v {
-        Var::Dof { seg, k, .. } => s.angles[seg][k] = x,
-        Var::Translation(k) => s.root[k] = x,
-    }
-}
-
 /// The state moved by `t·dx`.
 fn moved(p: &Problem, s: &RefState, dx: &[f64], t: f64) -> RefState {
     let mut out = s.clone();
     for (v, x) in p.vars.iter().zip(dx) {
-        set(v, &mut out, get(v, s) + t * x);
+        v.set(&mut out, v.get(s) + t * x);
     }
     out
 }
@@ -251,7 +237,7 @@ fn step(p: &Problem, s: &RefState, j: &[Vec<f64>], r: &[f64], d: &[f64]) -> Vec<
         let mut again = false;
         for (i, v) in p.vars.iter().enumerate() {
             if let (Var::Dof { min, max, .. }, None) = (*v, held[i]) {
-                let x = get(v, s);
+                let x = v.get(s);
                 let limit = (x + dx[i]).clamp(min, max);
                 if limit != x + dx[i] {
                     (held[i], again) = (Some(limit - x), true);

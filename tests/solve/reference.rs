@@ -271,13 +271,15 @@ impl Var {
             Var::Translation(_) => x,
         }
     }
-    fn get(&self, s: &RefState) -> f64 {
+    /// The variable's value in `s`.
+    pub fn get(&self, s: &RefState) -> f64 {
         match *self {
             Var::Dof { seg, k, .. } => s.angles[seg][k],
             Var::Translation(k) => s.root[k],
         }
     }
-    fn set(&self, s: &mut RefState, x: f64) {
+    /// Sets the variable's value in `s`.
+    pub fn set(&self, s: &mut RefState, x: f64) {
         match *self {
             Var::Dof { seg, k, .. } => s.angles[seg][k] = x,
             Var::Translation(k) => s.root[k] = x,
