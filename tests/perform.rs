@@ -251,3 +251,51 @@ fn a_rig_over_the_capacity_is_refused_as_too_large() {
         "humanoid16: 13 segments, 16 DOFs"
     );
 }
+
+/// A host stall on the way to the board: the messages from frame 40 on
+/// arrive 150 ms late, so the rig's real 100 ms fail-safe eases the servos
+/// towards rest before frame 40 (modelled natively: the core's own clock
+/// logic, not the replay's forced ticks). The replay of the on-time session
+/// follows that one trip and then matches the stalled outputs bit for bit;
+/// a changed target, or outputs that are no easing, stay mismatches.
+#[test]
+fn the_native_replay_follows_a_failsafe_trip_and_nothing_else() {
+    let s = setup_with(120, false, None);
+    let mut late = s.session.clone();
+    for sent in late.iter_mut().skip(2 + 40) {
+        sent.time_us += 150_000;
+    }
+    let stalled = perform::simulate_outputs(&s.region, &late).unwrap();
+    let on_time = perform::simulate_outputs(&s.region, &s.session).unwrap();
+    let first = (0..stalled.len()).find(|&k| stalled.get(k) != on_time.get(k));
+    assert_eq!(
+        first,
+        Some(40),
+        "the stall changes the outputs from frame 40"
+    );
+
+    let followed = perform::follow(&s.region, &s.session, &stalled).unwrap();
+    assert_eq!(followed.mismatches, 0);
+    let [(message, ticks)] = followed.trips[..] else {
+        panic!("one trip expected, got {:?}", followed.trips)
+    };
+    assert_eq!(message, 2 + 40, "before frame 40 (after Hello and Arm)");
+    let easing = followed.compared - s.frames;
+    assert!(easing > 10, "the stall eased {easing} steps");
+    assert_eq!(ticks as usize, easing, "one easing step per tick");
+    assert_eq!(followed.run.frame_targets.len(), s.frames);
+
+    let mut changed = stalled.clone();
+    changed[100][3] ^= 4;
+    let followed = perform::follow(&s.region, &s.session, &changed).unwrap();
+    assert_eq!(followed.mismatches, 1, "one changed target, one mismatch");
+
+    let mut scrambled = stalled.clone();
+    scrambled[60..].reverse();
+    let followed = perform::follow(&s.region, &s.session, &scrambled).unwrap();
+    assert!(
+        followed.mismatches > 50,
+        "{} mismatches",
+        followed.mismatches
+    );
+}

@@ -10,9 +10,12 @@
 //! The native run uses each frame's timestamp as the board clock and calls
 //! [`Performer::tick`] at the rig's frame period in the gaps, as the firmware
 //! does with its own clock. The emulated board streams as fast as its UART
-//! takes the bytes, so its clock never reaches the fail-safe time-out while
-//! frames are flowing: the servo targets of every tracker frame must be
-//! bit-identical between the two.
+//! takes the bytes, so its clock reaches the fail-safe time-out while frames
+//! are flowing only if the host stalls for longer than that: the board then
+//! rightly eases towards rest until the next frame. [`follow`] replays the
+//! session natively against the board's outputs and follows such trips (it
+//! finds each from the outputs, and keeps it only if the replay then matches
+//! bit for bit); every servo target must be bit-identical between the two.
 
 use crate::blob::{self, AxisSpec, BlobError, TableSpec};
 use crate::import::csv::TrackerSample;
@@ -268,25 +271,64 @@ pub fn simulate_with(
     session: &[Sent],
     observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
 ) -> Result<Run, PerformError> {
+    replay(region_bytes, session, &[], observe).map(|(run, _)| run)
+}
+
+/// Every servo output of a native run in the order a board sends them
+/// (frame-driven and easing interleaved, as on its servo link).
+pub fn simulate_outputs(
+    region_bytes: &[u8],
+    session: &[Sent],
+) -> Result<Vec<Vec<u16>>, PerformError> {
+    let (_, outputs) = replay(region_bytes, session, &[], &mut |_, _| {})?;
+    Ok(outputs.into_iter().map(|o| o.2).collect())
+}
+
+/// One output of a native run, in order: the index of the session message
+/// it came from (or before which its tick ran; the session's length for the
+/// easing after it), whether a tracker frame drove it, and the targets.
+type Output = (usize, bool, Vec<u16>);
+
+/// [`simulate_with`] with fail-safe trips forced: `trips` holds
+/// `(message index, ticks)`, and each of those ticks runs just before that
+/// message with the board clock at the fail-safe time-out or later (as a
+/// board whose host stalled sees it). Also returns every output in order.
+fn replay(
+    region_bytes: &[u8],
+    session: &[Sent],
+    trips: &[(usize, u32)],
+    observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
+) -> Result<(Run, Vec<Output>), PerformError> {
     let region = Region::parse(region_bytes);
+    let timeout_us = region.rig.as_ref().map_or(0, |r| r.failsafe_timeout_ms());
+    let timeout_us = timeout_us.saturating_mul(1000);
     let mut solver = SolverState::new();
     let mut performer = Performer::new(&region, &mut solver).ok_or(PerformError::NoRig)?;
     let period = performer.frame_period_us().max(1);
-    let mut run = Run::default();
+    let (mut run, mut outputs) = (Run::default(), Vec::new());
     let mut clock = session.first().map_or(0, |s| s.time_us);
-    for sent in session {
+    for (i, sent) in session.iter().enumerate() {
+        let mut step = |p: &Performer<'_, '_>, u: Update| {
+            record(&mut run, &mut outputs, i, p, u, observe);
+        };
         // Board-clock ticks in the gap before this message.
         while sent.time_us.wrapping_sub(clock) >= period
             && sent.time_us.wrapping_sub(clock) < u32::MAX / 2
         {
             clock = clock.wrapping_add(period);
             let update = performer.tick(clock);
-            record(&mut run, &performer, update, observe);
+            step(&performer, update);
+        }
+        let forced = trips.iter().filter(|t| t.0 == i).map(|t| t.1).sum::<u32>();
+        for k in 0..forced {
+            let late = timeout_us.wrapping_add(k.wrapping_mul(period));
+            let update = performer.tick(sent.time_us.wrapping_add(late));
+            step(&performer, update);
         }
         let mut input = sent.bytes.as_slice();
         while !input.is_empty() {
             let update = performer.receive(&mut input, sent.time_us, &mut NoCycles);
-            record(&mut run, &performer, update, observe);
+            step(&performer, update);
         }
     }
     // After the session: tick until every servo is at rest (bounded).
@@ -296,13 +338,22 @@ pub fn simulate_with(
         }
         clock = clock.wrapping_add(period);
         let update = performer.tick(clock);
-        record(&mut run, &performer, update, observe);
+        record(
+            &mut run,
+            &mut outputs,
+            session.len(),
+            &performer,
+            update,
+            observe,
+        );
     }
-    Ok(run)
+    Ok((run, outputs))
 }
 
 fn record(
     run: &mut Run,
+    outputs: &mut Vec<Output>,
+    message: usize,
     performer: &Performer<'_, '_>,
     update: Update,
     observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
@@ -310,14 +361,154 @@ fn record(
     if update.outputs.is_some() || update.reply.is_some() {
         observe(performer, &update);
     }
+    let targets = performer.targets().to_vec();
     match update.outputs {
-        Some(Cause::Frame(_)) => run.frame_targets.push(performer.targets().to_vec()),
-        Some(Cause::Rest) => run.rest_targets.push(performer.targets().to_vec()),
+        Some(Cause::Frame(_)) => {
+            outputs.push((message, true, targets.clone()));
+            run.frame_targets.push(targets);
+        }
+        Some(Cause::Rest) => {
+            outputs.push((message, false, targets.clone()));
+            run.rest_targets.push(targets);
+        }
         None => {}
     }
     if let Some(reply) = update.reply {
         run.replies.push(reply);
     }
+}
+
+/// A native replay of a session that follows the board's fail-safe trips.
+#[derive(Debug)]
+pub struct Followed {
+    /// The native run, with the trips.
+    pub run: Run,
+    /// The trips followed: `(session message index, ticks)`, each a run of
+    /// easing steps the board took just before that message.
+    pub trips: Vec<(usize, u32)>,
+    /// Outputs compared: up to the last frame-driven one (the easing after
+    /// the session is not compared).
+    pub compared: usize,
+    /// The outputs compared that still differ from the board's, or that the
+    /// board did not send.
+    pub mismatches: usize,
+}
+
+/// Most fail-safe trips [`follow`] looks for.
+const MAX_TRIPS: usize = 64;
+
+/// A replay with these trips, and where its outputs first differ from the
+/// board's (up to its last frame-driven output).
+struct Attempt {
+    run: Run,
+    outputs: Vec<Output>,
+    first: Option<usize>,
+}
+
+fn attempt(
+    region_bytes: &[u8],
+    session: &[Sent],
+    trips: &[(usize, u32)],
+    board: &[Vec<u16>],
+) -> Result<Attempt, PerformError> {
+    let (run, outputs) = replay(region_bytes, session, trips, &mut |_, _| {})?;
+    let span = compared(&outputs);
+    let first = (0..span).find(|&k| board.get(k) != outputs.get(k).map(|o| &o.2));
+    Ok(Attempt {
+        run,
+        outputs,
+        first,
+    })
+}
+
+/// The outputs compared: up to the last frame-driven one.
+fn compared(outputs: &[Output]) -> usize {
+    outputs.iter().rposition(|o| o.1).map_or(0, |k| k + 1)
+}
+
+/// Replays `session` natively against the board's servo outputs `board`
+/// (all of them, in order), following the board's fail-safe trips.
+///
+/// The board's clock is real: a host that stalls longer than the rig's
+/// fail-safe time-out makes the board ease towards rest in the middle of a
+/// stream, rightly. Where the outputs first differ, the replay tries easing
+/// ticks just before the message that output came from (1, 2, 4, … ticks;
+/// too many show how many); it keeps them only if the replay then matches
+/// the board past the easing and the frame after it, bit for bit. Anything
+/// else is a real mismatch, and counted.
+pub fn follow(
+    region_bytes: &[u8],
+    session: &[Sent],
+    board: &[Vec<u16>],
+) -> Result<Followed, PerformError> {
+    let mut trips = Vec::new();
+    let mut best = attempt(region_bytes, session, &trips, board)?;
+    while let (Some(k), true) = (best.first, trips.len() < MAX_TRIPS) {
+        let Some(&(message, _, _)) = best.outputs.get(k) else {
+            break;
+        };
+        let at = (message, k, compared(&best.outputs));
+        match trip(region_bytes, session, &trips, board, at)? {
+            Some((ticks, found)) => {
+                trips.push((message, ticks));
+                best = found;
+            }
+            None => break,
+        }
+    }
+    let span = compared(&best.outputs);
+    let differ = (0..span)
+        .filter(|&k| board.get(k) != best.outputs.get(k).map(|o| &o.2))
+        .count();
+    Ok(Followed {
+        run: best.run,
+        trips,
+        compared: span,
+        mismatches: differ,
+    })
+}
+
+/// The easing ticks before `message` that make the replay match the board
+/// at output `k` and past it, with that replay; `None` if there are none.
+/// `base`: the outputs compared without them.
+fn trip(
+    region_bytes: &[u8],
+    session: &[Sent],
+    trips: &[(usize, u32)],
+    board: &[Vec<u16>],
+    (message, k, base): (usize, usize, usize),
+) -> Result<Option<(u32, Attempt)>, PerformError> {
+    let with = |ticks: u32| {
+        let mut t = trips.to_vec();
+        t.push((message, ticks));
+        attempt(region_bytes, session, &t, board)
+    };
+    let mut ticks = 1u32;
+    while ticks <= 1 << 16 {
+        let a = with(ticks)?;
+        // Easing outputs the ticks added before the frame.
+        let added = compared(&a.outputs).saturating_sub(base);
+        match a.first {
+            // Past the easing and the frame after it: found.
+            None => return Ok(Some((ticks, a))),
+            Some(j) if j > k + added => return Ok(Some((ticks, a))),
+            // Every easing step matched, the frame did not: more.
+            Some(j) if j == k + added => ticks *= 2,
+            // Too many: the board's frame came after `j − k` steps.
+            Some(j) => {
+                let exact = u32::try_from(j - k).unwrap_or(0);
+                if exact == 0 || exact >= ticks {
+                    return Ok(None);
+                }
+                let a = with(exact)?;
+                let past = a
+                    .first
+                    .is_none_or(|j| j > k + usize::try_from(exact).unwrap_or(0));
+                return Ok(past.then_some((exact, a)));
+            }
+        }
+    }
+    Ok(None)
 }
 
 /// Runs a session on the emulated board with `region_file` in its table

@@ -189,6 +189,9 @@ pub struct Summary {
     pub frames_out: usize,
     /// Output frames differing from the native core (missing ones count).
     pub mismatches: usize,
+    /// Times the board's fail-safe tripped mid-stream (host stalls longer
+    /// than the rig's time-out), followed by the native replay.
+    pub failsafe_trips: usize,
     /// Easing steps to rest after the last frame (the board's).
     pub rest_steps: usize,
     /// Easing steps to rest natively.
@@ -414,6 +417,7 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         frames_in: inputs.frames,
         frames_out: emulated.frame_outputs,
         mismatches: emulated.mismatches,
+        failsafe_trips: emulated.failsafe_trips,
         rest_steps: emulated.rest_steps,
         rest_steps_native: native.run.rest_targets.len(),
         replies: emulated.replies,
@@ -464,6 +468,14 @@ fn text(s: &Summary, period_us: u32) -> String {
         s.frames_out,
         s.mismatches
     );
+    if s.failsafe_trips > 0 {
+        let _ = writeln!(
+            o,
+            "the board's fail-safe tripped {} times mid-stream (the host stalled for longer than \
+             the rig's time-out); the native replay followed each",
+            s.failsafe_trips
+        );
+    }
     let _ = writeln!(
         o,
         "after the last frame: {} steps to rest (native {}); {} replies, {} receive errors; \

@@ -46,8 +46,13 @@ pub struct Summary {
     pub frames: usize,
     /// Output frames the board sent for them.
     pub frame_outputs: usize,
-    /// Output frames that differ from the native core's (missing ones count).
+    /// Output frames that differ from the native core's (missing ones count),
+    /// with the native replay following the board's fail-safe trips.
     pub mismatches: usize,
+    /// Times the board's fail-safe tripped in the middle of the stream (a
+    /// host stall longer than the rig's time-out) and eased towards rest;
+    /// the native replay followed each (see [`perform::follow`]).
+    pub failsafe_trips: usize,
     /// Easing steps to rest after the session.
     pub rest_steps: usize,
     /// Replies (status, acks, telemetry) decoded from the board.
@@ -82,19 +87,22 @@ pub fn compare(
         pacing,
         std::time::Duration::ZERO,
     )?;
-    let differing = native
+    // Every output the board sent, in order (the split above is by count).
+    let sent: Vec<Vec<u16>> = board
         .frame_targets
         .iter()
-        .zip(&board.frame_targets)
-        .filter(|(a, b)| a != b)
-        .count();
+        .chain(&board.rest_targets)
+        .cloned()
+        .collect();
+    let followed = perform::follow(&inputs.region, &inputs.session, &sent)?;
     let csv = out.join("servo_emulated.csv");
     sim::write_servo_csv(&csv, inputs, &board)?;
     let summary = Summary {
         frames: inputs.frames,
         frame_outputs: board.frame_targets.len(),
-        mismatches: differing + expected.abs_diff(board.frame_targets.len()),
-        rest_steps: board.rest_targets.len(),
+        mismatches: followed.mismatches,
+        failsafe_trips: followed.trips.len(),
+        rest_steps: sent.len().saturating_sub(followed.compared),
         replies: board.replies.len(),
         ranges_us: sim::ranges(&board),
         servo_csv: csv.display().to_string(),
@@ -120,10 +128,11 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     } else {
         println!(
             "emulated board: {} tracker frames in, {} servo frames out, {} differ from the native core, \
-             {} steps to rest, {} replies; servo curves in {} ({:.1} s)",
+             {} fail-safe trips followed, {} steps to rest, {} replies; servo curves in {} ({:.1} s)",
             summary.frames,
             summary.frame_outputs,
             summary.mismatches,
+            summary.failsafe_trips,
             summary.rest_steps,
             summary.replies,
             summary.servo_csv,
