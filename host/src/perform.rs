@@ -496,7 +496,7 @@ fn trip(
             Some(j) if j == k + added => ticks *= 2,
             // Too many: the board's frame came after `j − k` steps.
             Some(j) => {
-                let exact = u32::try_from(j - k).unwrap_or(0);
+                let exact = u32::try_from(j.saturating_sub(k)).unwrap_or(0);
                 if exact == 0 || exact >= ticks {
                     return Ok(None);
                 }
