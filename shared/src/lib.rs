@@ -38,6 +38,7 @@ pub mod grid;
 pub mod math;
 pub mod output;
 pub mod pose;
+pub mod region;
 pub mod rig;
 pub mod servo;
 pub mod solve;
