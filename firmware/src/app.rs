@@ -10,7 +10,7 @@
 //! 2. every frame period of the board clock, calls [`Performer::tick`], which
 //!    eases the servos to rest after the fail-safe time-out or a disarm.
 //!
-//! A rig whose servo back-end the board cannot drive ([`Board::supports`])
+//! A rig whose servo back-end the board cannot drive ([`Board::SUPPORT`])
 //! never arms: its `Status` reason is `Unsupported`.
 //!
 //! The loop holds rigs of at most [`SEGMENTS`] segments (its RAM scales with
@@ -23,9 +23,10 @@
 
 use crate::board::{Board, Outcome};
 use embedded_io::{Read, ReadReady, Write};
-use marionette_core::frame::{Cycles, Performer, Region, Update};
+use marionette_core::frame::{Cycles, Performer, Update};
 use marionette_core::output::ServoOutput;
 use marionette_core::output::maestro::{Command, Maestro};
+use marionette_core::region::{FIRMWARE_SEGMENTS, Region};
 use marionette_core::solve::SolverState;
 use marionette_core::wire::{
     self, Ack, CommandKind, Incoming, MAX_FRAME, Message, PROTOCOL_VERSION, Receiver, Status,
@@ -41,8 +42,10 @@ const CHUNK: usize = 64;
 /// segments; 24 leaves room for a fuller figure within the 32 KB RAM budget
 /// (the largest Maestro drives 24 servos). The other shipped rig, `cmu31`
 /// (31 segments), is a reference skeleton for building tables, with no
-/// servos, and is not driven by a board.
-pub const SEGMENTS: usize = 24;
+/// servos, and is not driven by a board. The value lives in the core
+/// ([`FIRMWARE_SEGMENTS`]) so that the host checks a region at the same
+/// capacity before flashing it.
+pub const SEGMENTS: usize = FIRMWARE_SEGMENTS;
 
 /// The live loop at the firmware's capacity.
 pub type BoardPerformer<'r, 'a> = Performer<'r, 'a, SEGMENTS>;
@@ -75,7 +78,7 @@ fn drive<B: Board>(board: &mut B, region: &Region<'_, SEGMENTS>) -> Outcome {
     match performer.as_mut() {
         Some(performer) => {
             if let Some(rig) = &region.rig
-                && !board.supports(&rig.output())
+                && B::SUPPORT.check(&rig.output(), rig.servos()).is_err()
             {
                 performer.refuse(StatusReason::Unsupported);
             }

@@ -5,7 +5,7 @@
 //! [`Board`], implemented by [`qemu::Qemu`] (emulated `mps2-an386`) and
 //! `blackpill::BlackPill` (STM32F411).
 
-use marionette_core::rig::Output;
+use marionette_core::output::Support;
 
 #[cfg(feature = "qemu")]
 pub mod qemu;
@@ -52,15 +52,11 @@ pub trait Board {
     /// Microseconds since boot, wrapping at `u32::MAX`.
     fn now_us(&mut self) -> u32;
 
-    /// Whether this board can drive the servo back-end a rig asks for
-    /// (`[output]` in the rig file). The app drives a Pololu Maestro over
-    /// [`Board::ServoBus`]; the on-chip PWM and PCA9685 back-ends of
-    /// `marionette_core::output` need pins no board here wires yet, so a rig
-    /// asking for them is refused: the board does not arm, and its `Status`
-    /// says `Unsupported`.
-    fn supports(&self, output: &Output) -> bool {
-        matches!(output, Output::Maestro { .. })
-    }
+    /// The servo back-ends this board drives (`[output]` in the rig file):
+    /// a rig asking for another is refused (the board does not arm, and its
+    /// `Status` says `Unsupported`). The host checks a region against the
+    /// same description before flashing it.
+    const SUPPORT: Support;
 
     /// Tells the watchdog the loop is alive (no-op where there is none).
     fn feed_watchdog(&mut self);

@@ -4,8 +4,9 @@
 //!
 //! A session is the byte stream a tracker bridge sends: `Hello`, `Arm`, one
 //! `TrackerFrame` per recorded time step, and finally `Disarm`. The table
-//! region holds the rig blob followed by the table blob at the next 4-byte
-//! boundary ([`region`]), exactly as the firmware reads it.
+//! region holds the rig blob and the table blob behind a small directory
+//! ([`region`], the core's [`marionette_core::region`]), exactly as the
+//! firmware reads it.
 //!
 //! The native run uses each frame's timestamp as the board clock and calls
 //! [`Performer::tick`] at the rig's frame period in the gaps, as the firmware
@@ -21,7 +22,8 @@ use crate::blob::{self, AxisSpec, BlobError, TableSpec};
 use crate::import::csv::TrackerSample;
 use crate::qemu::{self, Config, QemuError};
 use crate::rigfile::RigFile;
-use marionette_core::frame::{Cause, NoCycles, Performer, Region, Update};
+use marionette_core::frame::{Cause, NoCycles, Performer, Update};
+use marionette_core::region::{self, Region};
 use marionette_core::servo::maestro;
 use marionette_core::solve::SolverState;
 use marionette_core::table::{Interp, Kind, Wrap};
@@ -67,14 +69,18 @@ pub enum PerformError {
     },
 }
 
-/// The table region image: the rig blob, zero padding to 4 bytes, the table
-/// blob (if any).
+/// The table region image (the core's [`region::write`]): a directory, the
+/// rig blob and the table blob (if any), exactly as the board reads it.
+/// Empty (a region without a rig) only if the blobs do not fit the format's
+/// 32-bit offsets.
 #[must_use]
 pub fn region(rig_blob: &[u8], table_blob: Option<&[u8]>) -> Vec<u8> {
-    let mut out = rig_blob.to_vec();
-    out.resize(out.len().next_multiple_of(4), 0);
-    if let Some(t) = table_blob {
-        out.extend_from_slice(t);
+    let mut entries = vec![region::Entry::rig(rig_blob)];
+    entries.extend(table_blob.map(region::Entry::table));
+    let mut out = vec![0u8; region::len(&entries).unwrap_or(0)];
+    match region::write(&entries, &mut out) {
+        Ok(n) => out.truncate(n),
+        Err(_) => out.clear(),
     }
     out
 }

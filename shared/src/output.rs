@@ -34,10 +34,12 @@
 pub mod maestro;
 pub mod pca9685;
 pub mod pwm;
+pub mod support;
 
 pub use maestro::Maestro;
 pub use pca9685::Pca9685;
 pub use pwm::Pwm;
+pub use support::{Refusal, Support};
 
 /// The lowest servo frame rate an output accepts, Hz (a 20 ms period).
 pub const FRAME_HZ_MIN: u32 = 50;

@@ -23,6 +23,7 @@ pub mod watchdog;
 
 use super::{Board, Outcome};
 use cortex_m::peripheral::DWT;
+use marionette_core::output::Support;
 use stm32f4::stm32f411 as pac;
 use uart::{Uart, divisor, divisor_error_permille};
 use watchdog::Watchdog;
@@ -37,6 +38,10 @@ pub const SERVO_BAUD: u32 = 115_200;
 
 const TRACKER_BRR: u16 = divisor(clock::PCLK2_HZ, TRACKER_BAUD);
 const SERVO_BRR: u16 = divisor(clock::PCLK1_HZ, SERVO_BAUD);
+const _: () = assert!(matches!(
+    Support::BLACKPILL.uart,
+    marionette_core::output::support::UartRate::Fixed(SERVO_BAUD)
+));
 // Both ends of a UART link tolerate a few percent in total; keep ours under 1 %.
 const _: () = assert!(divisor_error_permille(clock::PCLK2_HZ, TRACKER_BAUD, TRACKER_BRR) < 10);
 const _: () = assert!(divisor_error_permille(clock::PCLK1_HZ, SERVO_BAUD, SERVO_BRR) < 10);
@@ -230,9 +235,7 @@ impl Board for BlackPill {
     }
 
     /// A Maestro at [`SERVO_BAUD`] (the rate USART2 is programmed for).
-    fn supports(&self, output: &marionette_core::rig::Output) -> bool {
-        matches!(output, marionette_core::rig::Output::Maestro { baud } if *baud == SERVO_BAUD)
-    }
+    const SUPPORT: Support = Support::BLACKPILL;
 
     fn tables(&self) -> &'static [u8] {
         crate::region::tables()

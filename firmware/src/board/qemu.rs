@@ -9,6 +9,7 @@
 use super::{Board, Outcome};
 use core::convert::Infallible;
 use core::ptr::{read_volatile, write_volatile};
+use marionette_core::output::Support;
 
 /// Base address of CMSDK UART0 (tracker link).
 pub const UART0_BASE: usize = 0x4000_4000;
@@ -171,6 +172,8 @@ impl Board for Qemu {
     }
 
     fn feed_watchdog(&mut self) {}
+
+    const SUPPORT: Support = Support::EMULATED;
 
     /// Ticks of the 25 MHz timer 0 (under `-icount shift=7`, 3.2 per
     /// instruction).
