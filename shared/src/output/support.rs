@@ -138,6 +138,8 @@ pub const fn kind_name(output: &Output) -> &'static str {
         Output::Pwm { .. } => "pwm",
         Output::Pca9685 { .. } => "pca9685",
         Output::Maestro { .. } => "maestro",
+        Output::Dynamixel { .. } => "dynamixel",
+        Output::Feetech { .. } => "feetech",
     }
 }
 
@@ -171,6 +173,11 @@ impl Support {
                 self.check_baud(baud).ok_or(refuse)??;
                 output.channels()
             }
+            Output::Dynamixel { baud } | Output::Feetech { baud, .. } if self.bus_servos => {
+                self.check_baud(baud).ok_or(refuse)??;
+                output.channels()
+            }
+            Output::Dynamixel { .. } | Output::Feetech { .. } => return Err(refuse),
             Output::Pca9685 { .. } if self.pca9685 => output.channels(),
             Output::Pwm { .. } if self.pwm_channels > 0 => self.pwm_channels,
             Output::Pca9685 { .. } | Output::Pwm { .. } => return Err(refuse),
