@@ -5,8 +5,12 @@
 //!
 //! 1. reads whatever the tracker link has ready and feeds it to the
 //!    performer, sending each reply (`Status`, `Ack`, `Telemetry`) back as a
-//!    wire frame and each new set of servo targets to the servo bus as
-//!    Pololu Maestro Set Target commands;
+//!    wire frame and each new set of servo targets to the servo outputs the
+//!    rig names (`[output]`: a Maestro, bus servos, a PCA9685, timer PWM),
+//!    which the board set up through the core's output abstraction
+//!    ([`Board::open_servos`]); a board that needs time per frame on its
+//!    servo link ([`Board::servos_ready`]) gets the newest targets once it
+//!    can take them;
 //! 2. every frame period of the board clock, calls [`Performer::tick`], which
 //!    eases the servos to rest after the fail-safe time-out or a disarm.
 //!
@@ -25,7 +29,6 @@ use crate::board::{Board, Outcome};
 use embedded_io::{Read, ReadReady, Write};
 use marionette_core::frame::{Cycles, Performer, Update};
 use marionette_core::output::ServoOutput;
-use marionette_core::output::maestro::{Command, Maestro};
 use marionette_core::region::{FIRMWARE_SEGMENTS, Region};
 use marionette_core::solve::SolverState;
 use marionette_core::wire::{
@@ -77,10 +80,13 @@ fn drive<B: Board>(board: &mut B, region: &Region<'_, SEGMENTS>) -> Outcome {
     let mut performer = Performer::new(region, &mut solver);
     match performer.as_mut() {
         Some(performer) => {
-            if let Some(rig) = &region.rig
-                && B::SUPPORT.check(&rig.output(), rig.servos()).is_err()
-            {
-                performer.refuse(StatusReason::Unsupported);
+            if let Some(rig) = &region.rig {
+                let opened = B::SUPPORT
+                    .check(&rig.output(), rig.servos())
+                    .and_then(|()| board.open_servos(&rig.output(), rig.servos()));
+                if opened.is_err() {
+                    performer.refuse(StatusReason::Unsupported);
+                }
             }
             perform(board, performer)
         }
@@ -102,6 +108,8 @@ fn perform<B: Board>(board: &mut B, performer: &mut BoardPerformer<'_, '_>) -> O
     let period = performer.frame_period_us().max(1);
     let mut last_tick = board.now_us();
     let mut buf = [0u8; CHUNK];
+    // New targets not yet sent to the servos.
+    let mut pending = false;
     loop {
         board.feed_watchdog();
         let n = match read_ready(board, &mut buf) {
@@ -112,7 +120,7 @@ fn perform<B: Board>(board: &mut B, performer: &mut BoardPerformer<'_, '_>) -> O
         while !input.is_empty() {
             let now = board.now_us();
             let update = performer.receive(&mut input, now, &mut BoardCycles(board));
-            if let Err(outcome) = emit(board, performer, update) {
+            if let Err(outcome) = emit(board, performer, update, &mut pending) {
                 return outcome;
             }
         }
@@ -120,31 +128,50 @@ fn perform<B: Board>(board: &mut B, performer: &mut BoardPerformer<'_, '_>) -> O
         if now.wrapping_sub(last_tick) >= period {
             last_tick = now;
             let update = performer.tick(now);
-            if let Err(outcome) = emit(board, performer, update) {
+            if let Err(outcome) = emit(board, performer, update, &mut pending) {
                 return outcome;
             }
         }
-        if B::ENDS_ON_DISARM && performer.disarms() > 0 && performer.resting() {
+        if pending && let Err(outcome) = flush_servos(board, performer, &mut pending) {
+            return outcome;
+        }
+        if B::ENDS_ON_DISARM && !pending && performer.disarms() > 0 && performer.settled() {
             return Outcome::Done;
         }
     }
 }
 
-/// Sends an update's servo targets and reply.
+/// Sends an update's reply, and its servo targets as soon as the servo
+/// outputs can take them ([`Board::servos_ready`]).
 fn emit<B: Board>(
     board: &mut B,
     performer: &BoardPerformer<'_, '_>,
     update: Update,
+    pending: &mut bool,
 ) -> Result<(), Outcome> {
-    let (tracker, servo) = board.links();
+    if let Some(reply) = update.reply {
+        let (tracker, _) = board.links();
+        send(tracker, &reply)?;
+    }
     if update.outputs.is_some() {
-        let mut maestro = Maestro::new(&mut *servo, Command::SetTarget);
-        maestro
+        *pending = true;
+        flush_servos(board, performer, pending)?;
+    }
+    Ok(())
+}
+
+/// Writes the newest targets to the servo outputs if they can take them.
+fn flush_servos<B: Board>(
+    board: &mut B,
+    performer: &BoardPerformer<'_, '_>,
+    pending: &mut bool,
+) -> Result<(), Outcome> {
+    if board.servos_ready() {
+        let (_, servos) = board.links();
+        servos
             .write(performer.targets())
             .map_err(|_| Outcome::LinkError)?;
-    }
-    if let Some(reply) = update.reply {
-        send(tracker, &reply)?;
+        *pending = false;
     }
     Ok(())
 }

@@ -5,7 +5,8 @@
 //! [`Board`], implemented by [`qemu::Qemu`] (emulated `mps2-an386`) and
 //! `blackpill::BlackPill` (STM32F411).
 
-use marionette_core::output::Support;
+use marionette_core::output::{Refusal, ServoOutput, Support};
+use marionette_core::rig::{Output, ServoDesc};
 
 #[cfg(feature = "qemu")]
 pub mod qemu;
@@ -40,11 +41,26 @@ impl Outcome {
 pub trait Board {
     /// The tracker link: frames in, telemetry out.
     type Tracker: embedded_io::Read + embedded_io::Write + embedded_io::ReadReady;
-    /// The servo bus (for example a Pololu Maestro on a UART).
-    type ServoBus: embedded_io::Write;
+    /// The servo outputs, driving whichever back-end
+    /// [`Board::open_servos`] set up (the core's output abstraction).
+    type Servos: ServoOutput;
 
-    /// Both serial links at once.
-    fn links(&mut self) -> (&mut Self::Tracker, &mut Self::ServoBus);
+    /// The tracker link and the servo outputs at once.
+    fn links(&mut self) -> (&mut Self::Tracker, &mut Self::Servos);
+
+    /// Sets up the servo back-end a rig names (`output`, for its `servos`),
+    /// which [`Board::SUPPORT`] has accepted; writes nothing to the servos
+    /// (they stay as they were at power-up until the first frame after
+    /// arming). `Err` if the board cannot set it up after all.
+    fn open_servos(&mut self, output: &Output, servos: &[ServoDesc]) -> Result<(), Refusal>;
+
+    /// Whether the servo outputs can take a frame now. A board whose servo
+    /// link needs time per frame (a UART, an I2C bus) says no until the last
+    /// one has gone; the app keeps the newest targets meanwhile and sends
+    /// them when it may (the slew limiter still runs every frame).
+    fn servos_ready(&mut self) -> bool {
+        true
+    }
 
     /// The flash-resident table region.
     fn tables(&self) -> &'static [u8];

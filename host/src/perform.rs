@@ -23,7 +23,10 @@ use crate::import::csv::TrackerSample;
 use crate::qemu::{self, Config, QemuError};
 use crate::rigfile::RigFile;
 use marionette_core::frame::{Cause, NoCycles, Performer, Update};
+use marionette_core::output::bus::{self, Protocol};
+use marionette_core::output::{dynamixel, feetech};
 use marionette_core::region::{self, Region};
+use marionette_core::rig::{FeetechSeries, Output as RigOutput};
 use marionette_core::servo::maestro;
 use marionette_core::solve::SolverState;
 use marionette_core::table::{Interp, Kind, Wrap};
@@ -253,7 +256,8 @@ pub fn pace<E>(
 /// Everything a performance produced.
 #[derive(Clone, Debug, Default)]
 pub struct Run {
-    /// Servo targets (quarter-µs by channel) of each accepted tracker frame.
+    /// Servo targets (quarter-µs by channel; for bus servos, whole
+    /// positions × 4: [`ServoFormat::wire`]) of each accepted tracker frame.
     pub frame_targets: Vec<Vec<u16>>,
     /// Servo targets of each easing step after the frames (fail-safe or
     /// disarm), in order.
@@ -310,12 +314,17 @@ fn replay(
     let timeout_us = timeout_us.saturating_mul(1000);
     let mut solver = SolverState::new();
     let mut performer = Performer::new(&region, &mut solver).ok_or(PerformError::NoRig)?;
+    let format = ServoFormat::of_region(region_bytes, performer.targets().len());
+    let wire = |targets: &[u16]| match &format {
+        Some(f) => f.wire(targets),
+        None => targets.to_vec(),
+    };
     let period = performer.frame_period_us().max(1);
     let (mut run, mut outputs) = (Run::default(), Vec::new());
     let mut clock = session.first().map_or(0, |s| s.time_us);
     for (i, sent) in session.iter().enumerate() {
         let mut step = |p: &Performer<'_, '_>, u: Update| {
-            record(&mut run, &mut outputs, i, p, u, observe);
+            record(&mut run, &mut outputs, (i, &wire), p, u, observe);
         };
         // Board-clock ticks in the gap before this message.
         while sent.time_us.wrapping_sub(clock) >= period
@@ -339,7 +348,7 @@ fn replay(
     }
     // After the session: tick until every servo is at rest (bounded).
     for _ in 0..100_000 {
-        if performer.resting() {
+        if performer.settled() {
             break;
         }
         clock = clock.wrapping_add(period);
@@ -347,7 +356,7 @@ fn replay(
         record(
             &mut run,
             &mut outputs,
-            session.len(),
+            (session.len(), &wire),
             &performer,
             update,
             observe,
@@ -356,10 +365,15 @@ fn replay(
     Ok((run, outputs))
 }
 
+/// The view of targets as the servo link carries them.
+type Wire<'w> = dyn Fn(&[u16]) -> Vec<u16> + 'w;
+
+/// Records one update: `(message, wire)` are the session message it came
+/// from and the view of targets as the servo link carries them.
 fn record(
     run: &mut Run,
     outputs: &mut Vec<Output>,
-    message: usize,
+    (message, wire): (usize, &Wire<'_>),
     performer: &Performer<'_, '_>,
     update: Update,
     observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
@@ -367,7 +381,7 @@ fn record(
     if update.outputs.is_some() || update.reply.is_some() {
         observe(performer, &update);
     }
-    let targets = performer.targets().to_vec();
+    let targets = wire(performer.targets());
     match update.outputs {
         Some(Cause::Frame(_)) => {
             outputs.push((message, true, targets.clone()));
@@ -517,13 +531,209 @@ fn trip(
     Ok(None)
 }
 
+/// What the emulated board's servo link carries for a region's rig.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ServoFormat {
+    /// Pololu Maestro Set Target commands, `channels` per output.
+    Maestro {
+        /// Channels per output frame.
+        channels: usize,
+    },
+    /// Bus servo Sync Writes ([`marionette_core::output::bus`]).
+    Bus {
+        /// The packet format.
+        protocol: Protocol,
+        /// The bus id of each channel (`None`: no servo).
+        ids: Vec<Option<u8>>,
+    },
+}
+
+impl ServoFormat {
+    /// The format of a region's rig, `channels` per output frame (`None`
+    /// without a rig, or for an output that is not on a UART).
+    #[must_use]
+    pub fn of_region(region_bytes: &[u8], channels: usize) -> Option<Self> {
+        let region = Region::parse(region_bytes);
+        let rig = region.rig.as_ref()?;
+        let mut ids = vec![None; channels];
+        for s in rig.servos() {
+            if let Some(slot) = ids.get_mut(usize::from(s.channel)) {
+                *slot = Some(s.id);
+            }
+        }
+        match rig.output() {
+            RigOutput::Maestro { .. } => Some(Self::Maestro { channels }),
+            RigOutput::Dynamixel { .. } => Some(Self::Bus {
+                protocol: Protocol::Dynamixel,
+                ids,
+            }),
+            RigOutput::Feetech { series, .. } => Some(Self::Bus {
+                protocol: Protocol::Feetech(series),
+                ids,
+            }),
+            RigOutput::Pwm { .. } | RigOutput::Pca9685 { .. } => None,
+        }
+    }
+
+    /// At least how many bytes `frames` frame-driven outputs put on the
+    /// link.
+    #[must_use]
+    pub fn bytes_for(&self, frames: usize) -> usize {
+        match self {
+            Self::Maestro { channels } => frames * channels * 4,
+            Self::Bus { protocol, ids } => {
+                let n = ids.iter().flatten().count();
+                frames * protocol.frame_bytes(n)
+            }
+        }
+    }
+
+    /// The targets as they go on the link: a bus servo's position is
+    /// whole, so its quarter units are rounded to a multiple of 4.
+    #[must_use]
+    pub fn wire(&self, targets: &[u16]) -> Vec<u16> {
+        match self {
+            Self::Maestro { .. } => targets.to_vec(),
+            Self::Bus { .. } => targets
+                .iter()
+                .map(|&q| bus::position(q).saturating_mul(4))
+                .collect(),
+        }
+    }
+
+    /// Splits the link's bytes into output frames of targets by channel
+    /// (bus positions as quarter units: `position · 4`).
+    #[must_use]
+    pub fn decode(&self, bytes: &[u8]) -> Vec<Vec<u16>> {
+        match self {
+            Self::Maestro { channels } => decode_maestro(bytes, *channels),
+            Self::Bus { protocol, ids } => decode_bus(*protocol, ids, bytes),
+        }
+    }
+}
+
+/// Bus servo packets as output frames: each Goal Position Sync Write is a
+/// frame (servos without a position: 0), and a Torque Enable = 0 to every
+/// servo that no Goal Position follows is a frame of zeros (the release).
+fn decode_bus(protocol: Protocol, ids: &[Option<u8>], bytes: &[u8]) -> Vec<Vec<u16>> {
+    let (torque_at, goal_at) = match protocol {
+        Protocol::Dynamixel => (dynamixel::TORQUE_ENABLE, dynamixel::GOAL_POSITION),
+        Protocol::Feetech(_) => (
+            u16::from(feetech::TORQUE_ENABLE),
+            u16::from(feetech::GOAL_POSITION),
+        ),
+    };
+    let packets = bus_packets(protocol, bytes);
+    let mut frames = Vec::new();
+    for (i, (address, items)) in packets.iter().enumerate() {
+        let next_is_goal = packets.get(i + 1).is_some_and(|(a, _)| *a == goal_at);
+        if *address == goal_at {
+            let mut frame = vec![0u16; ids.len()];
+            for (id, value) in items {
+                if let Some(ch) = ids.iter().position(|x| *x == Some(*id)) {
+                    frame[ch] = value.saturating_mul(4);
+                }
+            }
+            frames.push(frame);
+        } else if *address == torque_at
+            && !next_is_goal
+            && items.iter().all(|(_, v)| *v == 0)
+            && items.len() == ids.iter().flatten().count()
+        {
+            frames.push(vec![0u16; ids.len()]);
+        }
+    }
+    frames
+}
+
+/// The Sync Writes in a byte stream: (address, (id, value)…), values of
+/// one byte or a 2/4-byte position in the bus' byte order. Stops at the
+/// first byte that does not start a valid packet.
+fn bus_packets(protocol: Protocol, mut bytes: &[u8]) -> Vec<(u16, Vec<(u8, u16)>)> {
+    let mut out = Vec::new();
+    loop {
+        let parsed = match protocol {
+            Protocol::Dynamixel => dynamixel_packet(bytes),
+            Protocol::Feetech(series) => feetech_packet(series, bytes),
+        };
+        let Some((packet, rest)) = parsed else {
+            return out;
+        };
+        out.push(packet);
+        bytes = rest;
+    }
+}
+
+type Packet = (u16, Vec<(u8, u16)>);
+
+/// One Protocol 2.0 Sync Write (no stuffing: positions never need it).
+fn dynamixel_packet(b: &[u8]) -> Option<(Packet, &[u8])> {
+    if b.get(..5)? != [0xFF, 0xFF, 0xFD, 0x00, 0xFE] {
+        return None;
+    }
+    let len = usize::from(u16::from_le_bytes([*b.get(5)?, *b.get(6)?]));
+    let end = 7 + len;
+    let packet = b.get(..end)?;
+    let crc = u16::from_le_bytes([*packet.get(end - 2)?, *packet.get(end - 1)?]);
+    if dynamixel::crc16(packet.get(..end - 2)?) != crc || *packet.get(7)? != dynamixel::SYNC_WRITE {
+        return None;
+    }
+    let address = u16::from_le_bytes([*packet.get(8)?, *packet.get(9)?]);
+    let data_len = usize::from(u16::from_le_bytes([*packet.get(10)?, *packet.get(11)?]));
+    let items = packet
+        .get(12..end - 2)?
+        .chunks_exact(data_len + 1)
+        .map(|c| {
+            let mut v = [0u8; 4];
+            for (d, s) in v.iter_mut().zip(c.get(1..).unwrap_or(&[])) {
+                *d = *s;
+            }
+            (c[0], u32::from_le_bytes(v).min(u32::from(u16::MAX)) as u16)
+        })
+        .collect();
+    Some(((address, items), b.get(end..)?))
+}
+
+/// One Feetech Sync Write.
+fn feetech_packet(series: FeetechSeries, b: &[u8]) -> Option<(Packet, &[u8])> {
+    if b.get(..3)? != [0xFF, 0xFF, 0xFE] {
+        return None;
+    }
+    let len = usize::from(*b.get(3)?);
+    let end = 4 + len;
+    let packet = b.get(..end)?;
+    let sum = packet
+        .get(2..end - 1)?
+        .iter()
+        .fold(0u8, |s, &x| s.wrapping_add(x));
+    if !sum != *packet.get(end - 1)? || *packet.get(4)? != feetech::SYNC_WRITE {
+        return None;
+    }
+    let address = u16::from(*packet.get(5)?);
+    let data_len = usize::from(*packet.get(6)?);
+    let items = packet
+        .get(7..end - 1)?
+        .chunks_exact(data_len + 1)
+        .map(|c| {
+            let value = match (data_len, series) {
+                (2, FeetechSeries::Sts) => u16::from_le_bytes([c[1], c[2]]),
+                (2, FeetechSeries::Scs) => u16::from_be_bytes([c[1], c[2]]),
+                _ => u16::from(c[1]),
+            };
+            (c[0], value)
+        })
+        .collect();
+    Some(((address, items), b.get(end..)?))
+}
+
 /// Runs a session on the emulated board with `region_file` in its table
 /// region, streaming as fast as the link takes it. `channels` is the number
 /// of servo channels per output frame (the rig's highest channel + 1) and
 /// `frames` the number of frame-driven outputs expected. Messages are sent as
 /// `pacing` says; the last one (the `Disarm`) is sent after the board has
 /// answered every frame and a further `pause` (a pause longer than the
-/// fail-safe time-out exercises it).
+/// fail-safe time-out exercises it). The servo link is decoded by the rig's
+/// output ([`ServoFormat`]).
 pub fn emulate(
     region_file: &Path,
     session: &[Sent],
@@ -532,6 +742,12 @@ pub fn emulate(
     pacing: Pacing,
     pause: Duration,
 ) -> Result<(Run, Vec<u8>), PerformError> {
+    let region_bytes = std::fs::read(region_file).map_err(|source| PerformError::Io {
+        path: region_file.display().to_string(),
+        source,
+    })?;
+    let format = ServoFormat::of_region(&region_bytes, channels)
+        .unwrap_or(ServoFormat::Maestro { channels });
     let elf = qemu::build_firmware("perform")?;
     let config = Config {
         tables: Some(region_file.to_path_buf()),
@@ -542,13 +758,13 @@ pub fn emulate(
     let (body, last) = session.split_at(session.len().saturating_sub(1));
     pace(body, pacing, |bytes| emulator.send(bytes))?;
     // Let the board finish the frames before it is told to stop.
-    emulator.wait_servo_bytes(frames * channels * 4)?;
+    emulator.wait_servo_bytes(format.bytes_for(frames))?;
     std::thread::sleep(pause);
     for sent in last {
         emulator.send(&sent.bytes)?;
     }
     let out = emulator.finish()?;
-    let mut targets = decode_maestro(&out.servo, channels);
+    let mut targets = format.decode(&out.servo);
     let rest = targets.split_off(frames.min(targets.len()));
     let replies = decode_replies(&out.tracker);
     Ok((

@@ -46,8 +46,13 @@
 //! [`Performer::tick`] is called by the board every frame period with its own
 //! clock. When armed and no valid tracker frame has arrived for the rig's
 //! fail-safe timeout, every servo eases to its rest pulse within its slew
-//! limits. The same happens after `Disarm`. A board without a valid rig and
-//! table refuses to arm and reports why in its [`Status`].
+//! limits. The same happens after `Disarm`. Once every servo is at rest,
+//! a rig whose idle policy is `Off` ([`crate::rig::Idle`]) releases the
+//! outputs with one more update whose targets are all 0 ("no pulse"; a bus
+//! servo's torque off); `Hold` keeps the rest targets. Outputs are never
+//! written before the first armed frame, and the next armed frame drives
+//! them again from rest. A board without a valid rig and table refuses to
+//! arm and reports why in its [`Status`].
 //!
 //! ## Capacity
 //!
@@ -74,7 +79,7 @@ use crate::body::{Angles, Body};
 use crate::goal::GoalSet;
 use crate::grid::{Adjust, Grid, Query};
 use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
-use crate::rig::{MAX_PARAMS, Rig};
+use crate::rig::{Idle, MAX_PARAMS, Rig};
 use crate::servo::{Slew, quarter_us};
 use crate::solve::{self, Solver, SolverState};
 use crate::table::Table;
@@ -265,6 +270,10 @@ pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
     receiver: Receiver,
     armed: bool,
     resting: bool,
+    /// Whether an armed frame has driven the outputs since boot.
+    driven: bool,
+    /// Whether the outputs were released at rest (the rig's `Idle::Off`).
+    released: bool,
     last_frame_us: u32,
     last_tracker_us: Option<u32>,
     params: [f32; MAX_PARAMS],
@@ -340,6 +349,8 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             receiver: Receiver::new(),
             armed: false,
             resting: true,
+            driven: false,
+            released: false,
             last_frame_us: 0,
             last_tracker_us: None,
             params: [0.0; MAX_PARAMS],
@@ -493,9 +504,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         let lost = self.armed && now_us.wrapping_sub(self.last_frame_us) >= timeout_us;
         if lost || !self.armed {
             self.warm.clear();
-        }
-        if (lost || !self.armed) && !self.resting {
-            let moved = self.ease_to_rest();
+            let moved = self.rest_step();
             return Update {
                 outputs: moved.then_some(Cause::Rest),
                 reply: None,
@@ -523,6 +532,34 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     #[must_use]
     pub fn resting(&self) -> bool {
         self.resting
+    }
+
+    /// Whether the outputs have nothing left to do until the next armed
+    /// frame: at rest, and released if the rig's idle policy is `Off` (and
+    /// they were ever driven).
+    #[must_use]
+    pub fn settled(&self) -> bool {
+        self.resting && !self.release_due()
+    }
+
+    /// Whether the outputs are at rest but still to be released.
+    fn release_due(&self) -> bool {
+        self.rig.idle() == Idle::Off && self.driven && !self.released
+    }
+
+    /// One step towards rest, disarmed or timed out: ease to rest, then
+    /// (idle policy `Off`) release every output once. True if the targets
+    /// changed.
+    fn rest_step(&mut self) -> bool {
+        if !self.resting {
+            self.ease_to_rest()
+        } else if self.release_due() {
+            self.released = true;
+            self.targets.fill(0);
+            true
+        } else {
+            false
+        }
     }
 
     fn command(&mut self, c: ValidCommand) -> Message {
@@ -572,13 +609,15 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         let dt = self.frame_dt(frame.time_us());
         self.remember(frame);
         if !self.armed {
-            let moved = !self.resting && self.ease_to_rest();
+            let moved = self.rest_step();
             return Update {
                 outputs: moved.then_some(Cause::Rest),
                 reply: None,
             };
         }
         self.resting = false;
+        self.released = false;
+        self.driven = true;
         let t0 = cycles.now();
         self.map();
         let t1 = cycles.now();

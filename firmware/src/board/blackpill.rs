@@ -23,7 +23,9 @@ pub mod watchdog;
 
 use super::{Board, Outcome};
 use cortex_m::peripheral::DWT;
-use marionette_core::output::Support;
+use marionette_core::output::serial::{Serial, UartServos};
+use marionette_core::output::{Refusal, Support};
+use marionette_core::rig::{Output, ServoDesc};
 use stm32f4::stm32f411 as pac;
 use uart::{Uart, divisor, divisor_error_permille};
 use watchdog::Watchdog;
@@ -170,7 +172,7 @@ fn route_pins(gpioa: &pac::GPIOA) {
 /// The Black Pill board.
 pub struct BlackPill {
     tracker: Uart<pac::USART1>,
-    servo: Uart<pac::USART2>,
+    servo: UartServos<Uart<pac::USART2>>,
     watchdog: Watchdog,
     micros: Micros,
     reset_cause: ResetCause,
@@ -196,7 +198,10 @@ impl BlackPill {
         let _ = dp.RCC.apb2enr().read();
         route_pins(&dp.GPIOA);
         let tracker = Uart::new(dp.USART1, TRACKER_BRR);
-        let servo = Uart::new(dp.USART2, SERVO_BRR);
+        let servo = UartServos {
+            uart: Uart::new(dp.USART2, SERVO_BRR),
+            serial: Serial::None,
+        };
 
         // Keep the watchdog from resetting the chip while a debugger halts it.
         dp.DBGMCU
@@ -228,10 +233,18 @@ impl BlackPill {
 
 impl Board for BlackPill {
     type Tracker = Uart<pac::USART1>;
-    type ServoBus = Uart<pac::USART2>;
+    type Servos = UartServos<Uart<pac::USART2>>;
 
-    fn links(&mut self) -> (&mut Self::Tracker, &mut Self::ServoBus) {
+    fn links(&mut self) -> (&mut Self::Tracker, &mut Self::Servos) {
         (&mut self.tracker, &mut self.servo)
+    }
+
+    fn open_servos(&mut self, output: &Output, servos: &[ServoDesc]) -> Result<(), Refusal> {
+        self.servo.serial = Serial::for_output(output, servos).ok_or(Refusal::Backend {
+            kind: marionette_core::output::support::kind_name(output),
+            board: Self::SUPPORT.board,
+        })?;
+        Ok(())
     }
 
     /// A Maestro at [`SERVO_BAUD`] (the rate USART2 is programmed for).
@@ -256,7 +269,7 @@ impl Board for BlackPill {
     }
 
     fn finish(&mut self, outcome: Outcome) -> ! {
-        let _ = embedded_io::Write::flush(&mut self.servo);
+        let _ = embedded_io::Write::flush(&mut self.servo.uart);
         defmt::warn!(
             "session ended: status {}, {} log frames dropped",
             outcome.exit_status(),

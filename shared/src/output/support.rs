@@ -148,7 +148,7 @@ impl Support {
     pub const EMULATED: Self = Self {
         board: "emulated board",
         uart: UartRate::Any,
-        bus_servos: false,
+        bus_servos: true,
         pca9685: false,
         pwm_channels: 0,
     };
