@@ -600,11 +600,13 @@ fn describe(i: &Invalid) -> String {
     let hint = match i.field {
         "frame_period_us" => " (100 ..= 100000 µs)",
         "failsafe_timeout_ms" => " (1 ..= 60000 ms, and at least one frame period)",
-        "freq_hz" => " (pwm: 1 ..= 1000 Hz; pca9685: 24 ..= 1526 Hz)",
-        "i2c_addr" => " (a 7-bit address, ≤ 0x7F)",
-        "baud" => " (300 ..= 250000)",
+        "freq_hz" => " (pwm: 50 ..= 333 Hz; pca9685: 50 ..= 400 Hz)",
+        "i2c_addr" => " (a 7-bit address 0x08 ..= 0x7F, not 0x70)",
+        "baud" => {
+            " (maestro 300 ..= 250000, dynamixel 9600 ..= 4500000, feetech 38400 ..= 1000000)"
+        }
         "channel" => " (below the output's channel count: 16 for pca9685, 24 otherwise)",
-        "pulse_us" => " (1 ..= 4000 µs, two different values)",
+        "pulse_us" => " (1 ..= 4000 µs and shorter than the PWM period, two different values)",
         "trim_us" => " (±1000 µs)",
         "rest_us" => " (within pulse_us)",
         "max_speed" | "max_accel" => " (must be > 0)",

@@ -308,20 +308,20 @@ fn regions_the_board_would_not_arm_with_are_refused_with_its_reason() {
     // A table built for another rig.
     let other = perform::region(&humanoid16_blob(), Some(&tiny_blob()));
     assert_eq!(refused(&other).0, StatusReason::RigMismatch);
-    // A back-end the Black Pill does not drive.
+    // A rate the Black Pill's servo UART cannot make.
     let rig = rigfile::load(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../rigs/humanoid16.toml"
     )))
     .unwrap();
     let mut desc = rig.desc();
-    desc.output = marionette_core::rig::Output::Maestro { baud: 57_600 };
+    desc.output = marionette_core::rig::Output::Dynamixel { baud: 3_000_000 };
     let mut buf = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
     let n = desc.to_blob(&mut buf).unwrap();
     let table = perform::rest_grid(&rig, &[("x", 0.0, 1.0, 2)]).unwrap();
     let (reason, why) = refused(&perform::region(&buf[..n], Some(&table)));
     assert_eq!(reason, StatusReason::Unsupported);
-    assert!(why.contains("57600 baud"), "{why}");
+    assert!(why.contains("3000000 baud"), "{why}");
 }
 
 #[test]

@@ -54,8 +54,6 @@ pub enum UartRate {
     None,
     /// Any rate (an emulated UART moves bytes, not bits).
     Any,
-    /// Only this rate (programmed at build time).
-    Fixed(u32),
     /// A USART with 16× oversampling on this clock, Hz: a rate must divide
     /// to within [`MAX_BAUD_ERROR_PERMILLE`] and leave BRR ≥ 16.
     Clock(u32),
@@ -112,10 +110,6 @@ impl fmt::Display for Refusal {
             }
             Self::Baud {
                 baud,
-                error_permille: u32::MAX,
-            } => write!(f, "the servo UART cannot run at {baud} baud"),
-            Self::Baud {
-                baud,
                 error_permille,
             } => write!(
                 f,
@@ -153,13 +147,15 @@ impl Support {
         pwm_channels: 0,
     };
 
-    /// The STM32F411 Black Pill: USART2 programmed for 115 200 baud.
+    /// The STM32F411 Black Pill: USART2 on the 50 MHz APB1 clock (any rate
+    /// it divides to within 1 %), half-duplex for the bus servos; a PCA9685
+    /// on I2C1; 12 channels of TIM2, TIM3 and TIM4.
     pub const BLACKPILL: Self = Self {
         board: "Black Pill",
-        uart: UartRate::Fixed(115_200),
-        bus_servos: false,
-        pca9685: false,
-        pwm_channels: 0,
+        uart: UartRate::Clock(50_000_000),
+        bus_servos: true,
+        pca9685: true,
+        pwm_channels: 12,
     };
 
     /// Whether this board can drive `output` on the channels of `servos`.
@@ -196,11 +192,6 @@ impl Support {
         match self.uart {
             UartRate::None => None,
             UartRate::Any => Some(Ok(())),
-            UartRate::Fixed(rate) if rate == baud => Some(Ok(())),
-            UartRate::Fixed(_) => Some(Err(Refusal::Baud {
-                baud,
-                error_permille: u32::MAX,
-            })),
             UartRate::Clock(clock) => {
                 let brr = uart_divisor(clock, baud);
                 let error_permille = uart_error_permille(clock, baud, brr);

@@ -202,7 +202,8 @@ pub enum Output {
     },
     /// NXP PCA9685 16-channel PWM over I²C (variant 1).
     Pca9685 {
-        /// 7-bit I²C address (≤ 0x7F; 0x40 by default on the boards).
+        /// 7-bit I²C address (0x08 ..= 0x7F but not 0x70, the ALLCALL
+        /// address; 0x40 with no address pins strapped).
         i2c_addr: u8,
         /// Pulse repetition rate, Hz (50 ..= 400).
         freq_hz: u16,
@@ -607,7 +608,11 @@ impl<const N: usize> RigDesc<'_, N> {
         match self.output {
             Output::Pwm { freq_hz } => within(freq_hz, 50, 333, o, "freq_hz"),
             Output::Pca9685 { i2c_addr, freq_hz } => {
-                within(i2c_addr, 0, 0x7F, o, "i2c_addr")?;
+                // 0x00-0x07 are reserved, 0x70 is every PCA9685's ALLCALL.
+                within(i2c_addr, 0x08, 0x7F, o, "i2c_addr")?;
+                if i2c_addr == 0x70 {
+                    return Err(bad(o, "i2c_addr", Problem::OutOfRange));
+                }
                 within(freq_hz, 50, 400, o, "freq_hz")
             }
             Output::Maestro { baud } => within(baud, 300, 250_000, o, "baud"),
