@@ -187,8 +187,8 @@ fn the_capacity_never_changes_the_output() {
     let host = Region::parse(&inputs.region);
     let board = Region::<FIRMWARE_SEGMENTS>::parse_sized(&inputs.region);
     let (mut s1, mut s2) = (SolverState::new(), SolverState::new());
-    let mut a = Performer::new(&host, &mut s1).unwrap();
-    let mut b = Performer::new(&board, &mut s2).unwrap();
+    let mut a = Performer::new(&host, &mut s1);
+    let mut b = Performer::new(&board, &mut s2);
     let (mut time, mut armed) = (0, false);
     for (k, sent) in inputs.session.iter().enumerate() {
         let (mut ia, mut ib) = (sent.bytes.as_slice(), sent.bytes.as_slice());
@@ -198,7 +198,7 @@ fn the_capacity_never_changes_the_output() {
         while !ib.is_empty() {
             b.receive(&mut ib, sent.time_us, &mut NoCycles);
         }
-        let (pa, pb) = (a.pose(), b.pose());
+        let (pa, pb) = (a.pose().unwrap(), b.pose().unwrap());
         assert_eq!(pa.len(), pb.len());
         for s in 0..pa.len() {
             assert_eq!(pa.positions[s], pb.positions[s], "message {k}, segment {s}");

@@ -208,7 +208,7 @@ fn a_still_tracker_gives_a_still_figure() {
     let mut poses = Vec::new();
     perform::simulate_with(&region, &session, &mut |p, u| {
         if matches!(u.outputs, Some(marionette_core::frame::Cause::Frame(_))) {
-            poses.push(*p.pose());
+            poses.push(*p.pose().unwrap());
         }
     })
     .unwrap();
@@ -239,14 +239,20 @@ fn a_rig_over_the_capacity_is_refused_as_too_large() {
     let small = Region::<8>::parse_sized(&region);
     assert_eq!(small.reason, StatusReason::RigTooLarge);
     assert!(small.rig.is_none() && small.table.is_none());
-    assert!(Performer::new(&small, &mut SolverState::new()).is_none());
+    let mut solver = SolverState::new();
+    let refused = Performer::new(&small, &mut solver);
+    assert!(refused.pipeline().is_none() && refused.targets().is_empty());
+    assert_eq!(refused.reason(), StatusReason::RigTooLarge);
     let mut fits = Region::<16>::EMPTY;
     fits.parse_into(&region);
     assert_eq!(fits.reason, StatusReason::Ok);
     let mut solver = SolverState::new();
-    let performer = Performer::new(&fits, &mut solver).expect("humanoid16 (13 segments) fits 16");
+    let performer = Performer::new(&fits, &mut solver);
     assert_eq!(
-        performer.pose().len(),
+        performer
+            .pose()
+            .expect("humanoid16 (13 segments) fits 16")
+            .len(),
         13,
         "humanoid16: 13 segments, 16 DOFs"
     );

@@ -21,7 +21,8 @@ use crate::blob::{self, AxisSpec, BlobError, TableSpec};
 use crate::import::csv::TrackerSample;
 use crate::qemu::{self, Config, QemuError};
 use crate::rigfile::RigFile;
-use marionette_core::frame::{Cause, NoCycles, Performer, Region, Update};
+use marionette_core::frame::{NoCycles, Region};
+use marionette_core::perform::{Cause, Performer, Update};
 use marionette_core::servo::maestro;
 use marionette_core::solve::SolverState;
 use marionette_core::table::{Interp, Kind, Wrap};
@@ -303,7 +304,7 @@ fn replay(
     let timeout_us = region.rig.as_ref().map_or(0, |r| r.failsafe_timeout_ms());
     let timeout_us = timeout_us.saturating_mul(1000);
     let mut solver = SolverState::new();
-    let mut performer = Performer::new(&region, &mut solver).ok_or(PerformError::NoRig)?;
+    let mut performer = Performer::new(&region, &mut solver);
     let period = performer.frame_period_us().max(1);
     let (mut run, mut outputs) = (Run::default(), Vec::new());
     let mut clock = session.first().map_or(0, |s| s.time_us);

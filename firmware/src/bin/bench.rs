@@ -323,10 +323,11 @@ fn tracker_frame(i: u32) -> Message {
 fn frame_rows(counter: &mut Counter) {
     let region = Region::<{ app::SEGMENTS }>::parse_sized(region::tables());
     let mut solver = SolverState::new();
-    let Some(mut performer) = BoardPerformer::new(&region, &mut solver) else {
+    let mut performer = BoardPerformer::new(&region, &mut solver);
+    if performer.pipeline().is_none() {
         Line::new().str("frame: no rig in the table region").print();
         return;
-    };
+    }
     feed(
         &mut performer,
         &Message::Command(Command {

@@ -3,8 +3,8 @@
 
 use super::validate::{ValidCommand, ValidParams, ValidTrackerFrame};
 use super::{
-    ErrorCounters, FRAME_CAPACITY, FrameReader, Message, PROTOCOL_VERSION, SeqTracker, WireError,
-    decode_frame,
+    ErrorCounters, FRAME_CAPACITY, FrameReader, MIN_PROTOCOL_VERSION, Message, PROTOCOL_VERSION,
+    SeqTracker, WireError, decode_frame,
 };
 
 /// A validated host-to-board message. Stored inline (no heap), so variants
@@ -13,12 +13,13 @@ use super::{
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Incoming {
     /// A `Hello`. Answer with a `Status` carrying [`PROTOCOL_VERSION`] either
-    /// way; if `accepted` is false the versions differ, the mismatch was
+    /// way; if `accepted` is false the host's version is outside
+    /// [`MIN_PROTOCOL_VERSION`]`..=`[`PROTOCOL_VERSION`], the mismatch was
     /// counted, and every other message is rejected until a matching `Hello`.
     Hello {
         /// The host's protocol version.
         host_version: u16,
-        /// The host's version equals [`PROTOCOL_VERSION`].
+        /// The host's version is one this board speaks.
         accepted: bool,
     },
     /// A tracker frame.
@@ -35,7 +36,7 @@ pub enum Session {
     /// No `Hello` yet: messages are accepted (lenient start, so a bare
     /// stream works).
     Open,
-    /// The last `Hello` matched.
+    /// The last `Hello` carried a version this board speaks.
     Accepted,
     /// The last `Hello` carried another version: messages are rejected.
     Rejected {
@@ -166,7 +167,7 @@ impl<const N: usize> Receiver<N> {
     }
 
     fn hello(&mut self, host_version: u16) -> Incoming {
-        let accepted = host_version == PROTOCOL_VERSION;
+        let accepted = (MIN_PROTOCOL_VERSION..=PROTOCOL_VERSION).contains(&host_version);
         if accepted {
             self.session = Session::Accepted;
             self.seq.reset();
