@@ -277,7 +277,7 @@ pub fn wire(data: &[u8]) -> Outcome {
     let mut input = data;
     let mut accepted = 0u32;
     while let Some(incoming) = rx.push_slice(&mut input) {
-        check_incoming(&incoming);
+        check_incoming(&incoming, rx.frame());
         if !matches!(
             incoming,
             Incoming::Hello {
@@ -314,7 +314,7 @@ pub fn wire(data: &[u8]) -> Outcome {
 }
 
 /// The validated invariants of an accepted host message.
-fn check_incoming(incoming: &Incoming) {
+fn check_incoming(incoming: &Incoming, frame: &marionette_core::wire::ValidTrackerFrame) {
     match incoming {
         Incoming::Hello {
             host_version,
@@ -323,9 +323,9 @@ fn check_incoming(incoming: &Incoming) {
             *accepted,
             (wire::MIN_PROTOCOL_VERSION..=PROTOCOL_VERSION).contains(host_version)
         ),
-        Incoming::Tracker(f) => {
+        Incoming::Tracker => {
             let mut seen = 0u32;
-            for s in f.sensors() {
+            for s in frame.sensors() {
                 assert!(usize::from(s.id()) < MAX_SENSORS, "sensor id {}", s.id());
                 assert!(seen & (1 << s.id()) == 0, "repeated sensor id {}", s.id());
                 seen |= 1 << s.id();

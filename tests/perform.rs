@@ -36,7 +36,10 @@ fn setup_with(frames: u32, noise: bool, failsafe_timeout_ms: Option<u32>) -> Set
     let frames_v = perform::frames(&recording(frames)).unwrap();
     let mut session = perform::session(&frames_v).unwrap();
     if noise {
-        // Random bytes between messages (a small LCG: the inputs, not a result).
+        // Random bytes between messages (a small LCG: the inputs, not a
+        // result), each run closed by a 0x00: a session sends no delimiter
+        // before each frame (each ends in one), so noise not closed by one
+        // would take the next frame with it (see tests/protocol.rs).
         let mut seed = 12345u32;
         for sent in session.iter_mut().skip(2) {
             let mut junk = Vec::new();
@@ -45,6 +48,7 @@ fn setup_with(frames: u32, noise: bool, failsafe_timeout_ms: Option<u32>) -> Set
                 seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
                 junk.push((seed >> 24) as u8);
             }
+            junk.push(0);
             junk.extend_from_slice(&sent.bytes);
             sent.bytes = junk;
         }

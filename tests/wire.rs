@@ -623,14 +623,12 @@ fn sequence_gaps_counted_with_wrap() {
     for seq in [u32::MAX - 2, u32::MAX - 1, 1, 2, 2, 0, 6] {
         stream.extend(encode(&tracker(seq, &s)));
     }
-    let got = feed(&mut rx, &stream);
-    let seqs: Vec<u32> = got
-        .iter()
-        .map(|m| match m {
-            Incoming::Tracker(f) => f.seq(),
-            other => panic!("{other:?}"),
-        })
-        .collect();
+    let mut seqs = Vec::new();
+    let mut input = stream.as_slice();
+    while let Some(m) = rx.push_slice(&mut input) {
+        assert_eq!(m, Incoming::Tracker);
+        seqs.push(rx.frame().seq());
+    }
     assert_eq!(seqs, [u32::MAX - 2, u32::MAX - 1, 1, 2, 6]);
     // MAX-1 → 1 skips MAX and 0 (2 lost); 2 → 6 skips 3, 4, 5 (3 lost).
     assert_eq!(rx.errors().lost, 5);
@@ -717,9 +715,8 @@ fn validation_rejects_bad_values() {
         ],
     );
     let got = feed(&mut rx, &encode(&good));
-    let Incoming::Tracker(f) = got[0] else {
-        panic!("{got:?}")
-    };
+    assert_eq!(got, [Incoming::Tracker]);
+    let f = rx.frame();
     assert_eq!(f.sensors().len(), 3);
     let q = f.sensor(7).unwrap().rotation();
     // [w,x,y,z] = [0, 1.03, 0, 0] renormalised to the unit x quaternion.

@@ -27,8 +27,8 @@ use marionette_core::servo::maestro;
 use marionette_core::solve::SolverState;
 use marionette_core::table::{Interp, Kind, Wrap};
 use marionette_core::wire::{
-    self, Command, CommandKind, Hello, List, MAX_FRAME, MAX_SENSORS, Message, PROTOCOL_VERSION,
-    Sensor, TrackerFrame, WireError,
+    self, Command, CommandKind, CompactFrame, Hello, List, MAX_FRAME, MAX_SENSORS, Message,
+    PROTOCOL_VERSION, Sensor, TrackerFrame, WireError,
 };
 use std::path::Path;
 use std::time::Duration;
@@ -170,17 +170,53 @@ pub struct Sent {
 /// that the board resynchronises even after line noise that did not end in
 /// one (an empty frame is ignored by the receiver).
 pub fn encode(msg: &Message) -> Result<Vec<u8>, PerformError> {
-    let mut buf = [0u8; MAX_FRAME];
-    let frame = wire::encode(msg, &mut buf).map_err(PerformError::Wire)?;
-    let mut out = Vec::with_capacity(frame.len() + 1);
-    out.push(0);
-    out.extend_from_slice(frame);
+    let mut out = vec![0];
+    out.extend(frame_bytes(msg)?);
     Ok(out)
 }
 
-/// The session for a recording: `Hello`, `Arm`, the frames, `Disarm`. The
-/// host's sequence numbers are shared by frames and commands.
+/// Encodes a message as one wire frame (COBS, CRC, delimiter), nothing more.
+pub fn frame_bytes(msg: &Message) -> Result<Vec<u8>, PerformError> {
+    let mut buf = [0u8; MAX_FRAME];
+    let frame = wire::encode(msg, &mut buf).map_err(PerformError::Wire)?;
+    Ok(frame.to_vec())
+}
+
+/// How tracker frames travel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+pub enum Framing {
+    /// The compact frame (tag 7): quantized, 7 + 11 bytes per sensor of
+    /// payload. A frame with a position outside its ±4 m goes as `f32`.
+    #[default]
+    Compact,
+    /// The `f32` frame (tag 1), 29 bytes per sensor.
+    F32,
+}
+
+/// The message carrying `frame` as `framing` says (`f32` where the compact
+/// frame cannot carry it: a position outside ±4 m).
+#[must_use]
+pub fn tracker_message(frame: &TrackerFrame, framing: Framing) -> Message {
+    match framing {
+        Framing::Compact => match CompactFrame::pack(frame) {
+            Ok(c) => Message::CompactFrame(c),
+            Err(_) => Message::TrackerFrame(*frame),
+        },
+        Framing::F32 => Message::TrackerFrame(*frame),
+    }
+}
+
+/// The session for a recording: `Hello`, `Arm`, the frames, `Disarm`, the
+/// tracker frames compact ([`session_with`] chooses). The host's sequence
+/// numbers are shared by frames and commands.
 pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
+    session_with(frames, Framing::Compact)
+}
+
+/// [`session`] with the tracker frames framed as `framing` says. The first
+/// message starts with a `0x00` (the board resynchronises on it); the
+/// others are bare frames, each ending in its delimiter.
+pub fn session_with(frames: &[TrackerFrame], framing: Framing) -> Result<Vec<Sent>, PerformError> {
     let first = frames.first().map_or(0, |f| f.time_us);
     let last = frames.last().map_or(0, |f| f.time_us);
     let n = u32::try_from(frames.len()).unwrap_or(u32::MAX);
@@ -193,7 +229,7 @@ pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
         },
         Sent {
             time_us: first,
-            bytes: encode(&Message::Command(Command {
+            bytes: frame_bytes(&Message::Command(Command {
                 seq: 0,
                 kind: CommandKind::Arm,
             }))?,
@@ -202,7 +238,7 @@ pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
     for f in frames {
         out.push(Sent {
             time_us: f.time_us,
-            bytes: encode(&Message::TrackerFrame(*f))?,
+            bytes: frame_bytes(&tracker_message(f, framing))?,
         });
     }
     let disarm = Command {
@@ -211,7 +247,7 @@ pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
     };
     out.push(Sent {
         time_us: last,
-        bytes: encode(&Message::Command(disarm))?,
+        bytes: frame_bytes(&Message::Command(disarm))?,
     });
     Ok(out)
 }

@@ -2,7 +2,7 @@
 //!
 //! [`Pipeline`] is the per-frame work of a puppet (map, synthesize, solve,
 //! servo), shared by the firmware and the host's `marionette sim` through
-//! [`Performer`](crate::perform::Performer), which owns the protocol (hello,
+//! [`Performer`], which owns the protocol (hello,
 //! arm, disarm, status, fail-safe) and calls the pipeline once per accepted
 //! frame. Given the same frames and the same clock readings, host and board
 //! produce bit-identical servo targets.
@@ -523,7 +523,7 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         dt
     }
 
-    /// Drops the solver's correction (see [`Correction`]): the fail-safe
+    /// Drops the solver's correction (the warm start): the fail-safe
     /// tripped or the loop disarmed, so the next solve starts from the
     /// synthesized pose.
     pub fn drop_correction(&mut self) {

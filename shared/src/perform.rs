@@ -58,7 +58,6 @@ use crate::solve::SolverState;
 use crate::wire::{
     Ack, CommandKind, ErrorCounters, FrameTiming, Incoming, List, Message, PROTOCOL_VERSION,
     Receiver, STAGES, State, Status, StatusReason, Telemetry, Trip, ValidCommand,
-    ValidTrackerFrame,
 };
 
 /// A telemetry message goes out after every this many performed frames.
@@ -342,9 +341,9 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
                 Update::NONE
             }
             Incoming::Command(c) => Update::reply(self.command(c, now_us)),
-            Incoming::Tracker(frame) => {
+            Incoming::Tracker => {
                 self.stages[stage::DECODE] = decoded.wrapping_sub(start);
-                self.frame(&frame, now_us, cycles, start)
+                self.frame(now_us, cycles, start)
             }
         }
     }
@@ -427,16 +426,12 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     }
 
     /// One accepted tracker frame.
-    fn frame(
-        &mut self,
-        frame: &ValidTrackerFrame,
-        now_us: u32,
-        cycles: &mut dyn Cycles,
-        start: u32,
-    ) -> Update {
+    fn frame(&mut self, now_us: u32, cycles: &mut dyn Cycles, start: u32) -> Update {
         let Some(pipeline) = &mut self.pipeline else {
             return Update::NONE;
         };
+        let frame = self.receiver.frame();
+        let seq = frame.seq();
         let dt = pipeline.take(frame);
         if !self.armed {
             let moved = !pipeline.resting() && pipeline.ease_to_rest();
@@ -451,14 +446,14 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         self.stages[stage::TOTAL] = total;
         self.timing.add(total, self.budget(cycles));
         self.frames_out = self.frames_out.wrapping_add(1);
-        let tripped = self.end_trip(frame.seq());
+        let tripped = self.end_trip(seq);
         // The reply set in place: an update is hundreds of bytes.
         let mut update = Update {
-            outputs: Some(Cause::Frame(frame.seq())),
+            outputs: Some(Cause::Frame(seq)),
             reply: None,
         };
         if tripped || self.frames_out.is_multiple_of(TELEMETRY_EVERY) {
-            update.reply = Some(self.telemetry(frame.seq(), cycles));
+            update.reply = Some(self.telemetry(seq, cycles));
         }
         update
     }

@@ -26,7 +26,7 @@ use marionette_core::math;
 use marionette_core::pose::{LocalPose, Pose};
 use marionette_core::solve::{self, Method, Solver, SolverState};
 use marionette_core::wire::{
-    self, Command, CommandKind, List, MAX_FRAME, Message, Sensor, TrackerFrame,
+    self, Command, CommandKind, CompactFrame, List, MAX_FRAME, Message, Sensor, TrackerFrame,
 };
 use marionette_firmware::app::{self, BoardPerformer};
 use marionette_firmware::board::qemu::exit;
@@ -295,7 +295,8 @@ fn feed(performer: &mut BoardPerformer<'_, '_>, msg: &Message, now_us: u32) {
     }
 }
 
-/// A tracker frame: the right hand circling, left hand and pelvis still.
+/// A tracker frame, compact (as hosts send them by default): the right
+/// hand circling, left hand and pelvis still.
 fn tracker_frame(i: u32) -> Message {
     let a = i as f32 * 0.05;
     let sensor = |id, position| Sensor {
@@ -310,11 +311,15 @@ fn tracker_frame(i: u32) -> Message {
     ));
     let _ = sensors.push(sensor(1, [0.3, -0.2, 0.1]));
     let _ = sensors.push(sensor(2, [0.0, 0.0, 0.0]));
-    Message::TrackerFrame(TrackerFrame {
+    let frame = TrackerFrame {
         seq: i + 1,
         time_us: i * 1000,
         sensors,
-    })
+    };
+    match CompactFrame::pack(&frame) {
+        Ok(c) => Message::CompactFrame(c),
+        Err(_) => Message::TrackerFrame(frame),
+    }
 }
 
 /// The whole live loop per tracker frame on the table region's rig

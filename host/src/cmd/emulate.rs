@@ -31,6 +31,9 @@ pub struct Args {
     /// Send each frame at its recorded time instead of as fast as possible.
     #[arg(long)]
     pub realtime: bool,
+    /// How tracker frames travel: the compact frame (quantized) or `f32`.
+    #[arg(long, value_enum, default_value_t = perform::Framing::Compact)]
+    pub frame: perform::Framing,
     /// Also save the raw servo-bus bytes here.
     #[arg(long)]
     pub raw_servo: Option<PathBuf>,
@@ -113,7 +116,12 @@ pub fn compare(
 
 /// Runs the performance and prints its summary.
 pub fn run(args: &Args) -> Result<(), CmdError> {
-    let inputs = sim::load(&args.rig, args.tables.as_deref(), &args.recording)?;
+    let inputs = sim::load_with(
+        &args.rig,
+        args.tables.as_deref(),
+        &args.recording,
+        args.frame,
+    )?;
     let pacing = if args.realtime {
         Pacing::RealTime
     } else {

@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{ErrorCounters, List};
+use super::{CompactFrame, ErrorCounters, List};
 
 /// Maximum sensors in one [`TrackerFrame`].
 pub const MAX_SENSORS: usize = 16;
@@ -20,7 +20,8 @@ pub const MAX_GOALS: usize = 8;
 /// decode, map, synth, solve, servo, total.
 pub const STAGES: usize = 6;
 
-/// Every message, host to board (tags 0-3) and board to host (tags 4-6).
+/// Every message, host to board (tags 0-3 and 7) and board to host (tags
+/// 4-6).
 ///
 /// Variants differ a lot in size (a full `TrackerFrame` is ~470 bytes); with
 /// no heap they are stored inline on purpose.
@@ -42,6 +43,9 @@ pub enum Message {
     Telemetry(Telemetry),
     /// Tag 6, board → host: a command's result.
     Ack(Ack),
+    /// Tag 7 (version 2), host → board: one tracker sample, quantized
+    /// (see [`super::compact`]).
+    CompactFrame(CompactFrame),
 }
 
 /// Which way a message travels.
@@ -65,6 +69,7 @@ impl Message {
             Self::Status(_) => 4,
             Self::Telemetry(_) => 5,
             Self::Ack(_) => 6,
+            Self::CompactFrame(_) => 7,
         }
     }
 
@@ -72,9 +77,11 @@ impl Message {
     #[must_use]
     pub const fn direction(&self) -> Direction {
         match self {
-            Self::Hello(_) | Self::TrackerFrame(_) | Self::Params(_) | Self::Command(_) => {
-                Direction::HostToBoard
-            }
+            Self::Hello(_)
+            | Self::TrackerFrame(_)
+            | Self::Params(_)
+            | Self::Command(_)
+            | Self::CompactFrame(_) => Direction::HostToBoard,
             Self::Status(_) | Self::Telemetry(_) | Self::Ack(_) => Direction::BoardToHost,
         }
     }

@@ -85,6 +85,7 @@
 //! | 4 | [`Status`] | board → host | `protocol_version: u16, armed: bool, table_ok: bool, reason: StatusReason, errors: ErrorCounters, frames_ok: u32`; v2 appends `request_seq: Option<u32>, state: State, trips: u32` |
 //! | 5 | [`Telemetry`] | board → host | `seq: u32, servo_targets: List<u16, 24>, goal_residuals: List<f32, 8>, stage_counts: [u32; 6], errors: ErrorCounters`; v2 appends `state: State, trips: u32, last_trip: Trip, timing: FrameTiming` |
 //! | 6 | [`Ack`] | board → host | `seq: u32, ok: bool` |
+//! | 7 | [`CompactFrame`] (v2) | host → board | `seq16: [u8; 2], time24: [u8; 3], sensors: List<[u8; 11], 16>`: a tracker frame quantized, specified in [`compact`] |
 //!
 //! - [`Sensor`]: `id: u8, position: [f32; 3]` (metres), `rotation: [f32; 4]`
 //!   (`[w, x, y, z]`) — 29 bytes.
@@ -107,7 +108,8 @@
 //! - `servo_targets` are in quarter-microseconds (Maestro units).
 //!
 //! Largest payloads: `TrackerFrame` with 16 sensors and 5-byte varints
-//! 1 + 5 + 5 + 1 + 16 × 29 = 476 bytes; `Telemetry` 223; `Status` 64.
+//! 1 + 5 + 5 + 1 + 16 × 29 = 476 bytes; `Telemetry` 223; `Status` 64;
+//! `CompactFrame` 7 + 16 × 11 = 183.
 //!
 //! ### What the fields mean
 //!
@@ -169,8 +171,10 @@
 //! (a new variant also bumps the version, since an old decoder rejects it).
 //! Decoding is strict: trailing bytes after the message are a decode error.
 //!
-//! Version 2 only **appended** fields to the board's `Status` and
-//! `Telemetry`: every version-1 host message is valid version 2, so a
+//! Version 2 only **appended**: fields to the board's `Status` and
+//! `Telemetry`, and message tag 7 (the compact tracker frame, which hosts
+//! send by default; tag 1 stays valid). Every version-1 host message is
+//! valid version 2, so a
 //! board keeps accepting version-1 hosts. A version-1 host that decodes
 //! strictly rejects the longer replies; one that reads a reply's prefix
 //! (and ignores what follows) gets the version-1 fields unchanged. In every
@@ -211,12 +215,13 @@
 //! - Sender: [`encode`] a [`Message`] into a buffer of [`MAX_FRAME`] bytes and
 //!   write the returned slice.
 //! - Board receiver: [`Receiver`] (bytes in, validated [`Incoming`] out, all
-//!   counters kept), or the pieces: [`FrameReader`] → [`decode_frame`] →
-//!   [`SeqTracker`] → `validate()`.
+//!   counters kept; tracker frames validated in place), or the pieces:
+//!   [`FrameReader`] → [`decode_frame`] → [`SeqTracker`] → `validate()`.
 //!
 //! Nothing here allocates or panics.
 
 pub mod cobs;
+pub mod compact;
 mod error;
 mod list;
 mod message;
@@ -225,6 +230,7 @@ mod receiver;
 mod seq;
 mod validate;
 
+pub use compact::CompactFrame;
 pub use error::{ErrorCounters, WireError};
 pub use list::List;
 pub use message::{
