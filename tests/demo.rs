@@ -148,7 +148,8 @@ fn highest_hand_frame(recording: &std::path::Path) -> u32 {
 fn the_bundled_recording_is_what_marionette_record_makes() {
     // data/recordings/SOURCE.txt: `marionette record
     // data/hdm05_bk/HDM_bk_grabHighR_007_120.amc --skeleton
-    // data/hdm05_bk/HDM_bk.asf` with the defaults.
+    // data/hdm05_bk/HDM_bk.asf --frame f32` (the f32 frame's rounding:
+    // 0.1 mm, 1e-5) with the other defaults.
     use marionette_host::cmd::record;
     let hdm = repo().join("data/hdm05_bk");
     let motion = record::read_clip(
