@@ -53,8 +53,9 @@ pub struct Summary {
     /// with the native replay following the board's fail-safe trips.
     pub mismatches: usize,
     /// Times the board's fail-safe tripped in the middle of the stream (a
-    /// host stall longer than the rig's time-out) and eased towards rest;
-    /// the native replay followed each (see [`perform::follow`]).
+    /// host stall longer than the rig's time-out) and eased towards rest,
+    /// as the board reported them; the native replay followed each (see
+    /// [`perform::follow`]).
     pub failsafe_trips: usize,
     /// Easing steps to rest after the session.
     pub rest_steps: usize,
@@ -97,7 +98,7 @@ pub fn compare(
         .chain(&board.rest_targets)
         .cloned()
         .collect();
-    let followed = perform::follow(&inputs.region, &inputs.session, &sent)?;
+    let followed = perform::follow(&inputs.region, &inputs.session, &sent, &board.replies)?;
     let csv = out.join("servo_emulated.csv");
     sim::write_servo_csv(&csv, inputs, &board)?;
     let summary = Summary {
