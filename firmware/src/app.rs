@@ -1,7 +1,8 @@
 //! The app: the live loop, generic over the [`Board`].
 //!
-//! All the per-frame work is the core's [`Performer`]; the app only moves
-//! bytes. Each pass of the loop:
+//! Everything the board does with the tracker link is the core's
+//! [`Performer`] (the protocol, the fail-safe, the per-frame pipeline); the
+//! app only moves bytes. Each pass of the loop:
 //!
 //! 1. reads whatever the tracker link has ready and feeds it to the
 //!    performer, sending each reply (`Status`, `Ack`, `Telemetry`) back as a
@@ -19,22 +20,18 @@
 //!
 //! The loop holds rigs of at most [`SEGMENTS`] segments (its RAM scales with
 //! it); a valid rig with more is reported as `RigTooLarge` and, like a
-//! missing rig, drives nothing.
-//!
-//! Without a valid rig in the table region there is nothing to drive: the
-//! app answers `Hello` and `RequestStatus` with a `Status` whose reason is
-//! `NoRig`, refuses every other command, and never writes the servo bus.
+//! missing rig, drives nothing: the performer then answers `Hello` and
+//! `RequestStatus` with the reason, refuses `Arm`, and never writes the
+//! servo bus.
 
 use crate::board::{Board, Outcome};
 use embedded_io::{Read, ReadReady, Write};
-use marionette_core::frame::{Cycles, Performer, Update};
+use marionette_core::frame::Cycles;
 use marionette_core::output::ServoOutput;
+use marionette_core::perform::{Performer, Update};
 use marionette_core::region::{FIRMWARE_SEGMENTS, Region};
 use marionette_core::solve::SolverState;
-use marionette_core::wire::{
-    self, Ack, CommandKind, Incoming, MAX_FRAME, Message, PROTOCOL_VERSION, Receiver, Status,
-    StatusReason,
-};
+use marionette_core::wire::{self, MAX_FRAME, Message, StatusReason};
 
 /// Bytes read from the tracker link per pass.
 const CHUNK: usize = 64;
@@ -60,6 +57,10 @@ impl<B: Board> Cycles for BoardCycles<'_, B> {
     fn now(&mut self) -> u32 {
         self.0.cycles()
     }
+
+    fn hz(&self) -> u32 {
+        self.0.cycles_hz()
+    }
 }
 
 /// Runs the loop until the session ends (emulated board) or forever.
@@ -70,28 +71,24 @@ pub fn run<B: Board>(board: &mut B) -> Outcome {
     drive(board, &region)
 }
 
-/// Drives the region's rig, or idles without one. Not inlined into [`run`],
-/// so that the performer's stack frame is not below the region parse's.
+/// Drives the region's rig (or speaks the protocol without one). Not
+/// inlined into [`run`], so that the performer's stack frame is not below
+/// the region parse's.
 #[inline(never)]
 fn drive<B: Board>(board: &mut B, region: &Region<'_, SEGMENTS>) -> Outcome {
     // The solver's state is most of the loop's memory: made here, in place,
     // and lent to the performer (which stays small enough to move).
     let mut solver = SolverState::new();
     let mut performer = Performer::new(region, &mut solver);
-    match performer.as_mut() {
-        Some(performer) => {
-            if let Some(rig) = &region.rig {
-                let opened = B::SUPPORT
-                    .check(&rig.output(), rig.servos())
-                    .and_then(|()| board.open_servos(&rig.output(), rig.servos()));
-                if opened.is_err() {
-                    performer.refuse(StatusReason::Unsupported);
-                }
-            }
-            perform(board, performer)
+    if let Some(rig) = &region.rig {
+        let opened = B::SUPPORT
+            .check(&rig.output(), rig.servos())
+            .and_then(|()| board.open_servos(&rig.output(), rig.servos()));
+        if opened.is_err() {
+            performer.refuse(StatusReason::Unsupported);
         }
-        None => idle(board, region.reason),
     }
+    perform(board, &mut performer)
 }
 
 /// Reads what the tracker link has ready into `buf`.
@@ -183,52 +180,5 @@ fn send<W: Write>(link: &mut W, msg: &Message) -> Result<(), Outcome> {
         Ok(frame) => link.write_all(frame).map_err(|_| Outcome::LinkError),
         // Every board-to-host message fits MAX_FRAME; nothing to send otherwise.
         Err(_) => Ok(()),
-    }
-}
-
-/// No rig: report why, drive nothing.
-fn idle<B: Board>(board: &mut B, reason: StatusReason) -> Outcome {
-    let mut receiver: Receiver = Receiver::new();
-    let mut buf = [0u8; CHUNK];
-    loop {
-        board.feed_watchdog();
-        let n = match read_ready(board, &mut buf) {
-            Ok(n) => n,
-            Err(outcome) => return outcome,
-        };
-        let mut input = buf.get(..n).unwrap_or(&[]);
-        while let Some(incoming) = receiver.push_slice(&mut input) {
-            let status = Status {
-                protocol_version: PROTOCOL_VERSION,
-                armed: false,
-                table_ok: false,
-                reason,
-                errors: *receiver.errors(),
-                frames_ok: receiver.frames_ok(),
-            };
-            let (reply, end) = match incoming {
-                Incoming::Hello { .. } => (Some(Message::Status(status)), false),
-                Incoming::Command(c) => match c.kind() {
-                    CommandKind::RequestStatus => (Some(Message::Status(status)), false),
-                    kind => (
-                        Some(Message::Ack(Ack {
-                            seq: c.seq(),
-                            ok: false,
-                        })),
-                        kind == CommandKind::Disarm,
-                    ),
-                },
-                Incoming::Tracker(_) | Incoming::Params(_) => (None, false),
-            };
-            let (tracker, _) = board.links();
-            if let Some(reply) = reply
-                && let Err(outcome) = send(tracker, &reply)
-            {
-                return outcome;
-            }
-            if end && B::ENDS_ON_DISARM {
-                return Outcome::Done;
-            }
-        }
     }
 }

@@ -83,6 +83,13 @@ pub trait Board {
         0
     }
 
+    /// Counts per second of [`Board::cycles`] (0 where there is no
+    /// counter): the rig's frame period in counts is the budget the live
+    /// loop reports overruns against.
+    fn cycles_hz(&self) -> u32 {
+        0
+    }
+
     /// Whether a `Disarm` command ends the run once the servos are at rest
     /// (the emulated board, so tests end cleanly); a real board keeps going.
     const ENDS_ON_DISARM: bool = false;

@@ -13,26 +13,27 @@
 //! does with its own clock. The emulated board streams as fast as its UART
 //! takes the bytes, so its clock reaches the fail-safe time-out while frames
 //! are flowing only if the host stalls for longer than that: the board then
-//! rightly eases towards rest until the next frame. [`follow`] replays the
-//! session natively against the board's outputs and follows such trips (it
-//! finds each from the outputs, and keeps it only if the replay then matches
-//! bit for bit); every servo target must be bit-identical between the two.
+//! rightly eases towards rest until the next frame, and reports the trip in
+//! its telemetry (the message that ended it, and how many fail-safe ticks it
+//! lasted). [`follow`] replays the session natively with the trips the board
+//! reported; every servo target must then be bit-identical between the two.
 
 use crate::blob::{self, AxisSpec, BlobError, TableSpec};
 use crate::import::csv::TrackerSample;
 use crate::qemu::{self, Config, QemuError};
 use crate::rigfile::RigFile;
-use marionette_core::frame::{Cause, NoCycles, Performer, Update};
+use marionette_core::frame::NoCycles;
 use marionette_core::output::bus::{self, Protocol};
 use marionette_core::output::{dynamixel, feetech};
+use marionette_core::perform::{Cause, Performer, Update};
 use marionette_core::region::{self, Region};
 use marionette_core::rig::{FeetechSeries, Output as RigOutput};
 use marionette_core::servo::maestro;
 use marionette_core::solve::SolverState;
 use marionette_core::table::{Interp, Kind, Wrap};
 use marionette_core::wire::{
-    self, Command, CommandKind, Hello, List, MAX_FRAME, MAX_SENSORS, Message, PROTOCOL_VERSION,
-    Sensor, TrackerFrame, WireError,
+    self, Command, CommandKind, CompactFrame, Hello, List, MAX_FRAME, MAX_SENSORS, Message,
+    PROTOCOL_VERSION, Sensor, TrackerFrame, Trip, WireError,
 };
 use std::path::Path;
 use std::time::Duration;
@@ -178,17 +179,53 @@ pub struct Sent {
 /// that the board resynchronises even after line noise that did not end in
 /// one (an empty frame is ignored by the receiver).
 pub fn encode(msg: &Message) -> Result<Vec<u8>, PerformError> {
-    let mut buf = [0u8; MAX_FRAME];
-    let frame = wire::encode(msg, &mut buf).map_err(PerformError::Wire)?;
-    let mut out = Vec::with_capacity(frame.len() + 1);
-    out.push(0);
-    out.extend_from_slice(frame);
+    let mut out = vec![0];
+    out.extend(frame_bytes(msg)?);
     Ok(out)
 }
 
-/// The session for a recording: `Hello`, `Arm`, the frames, `Disarm`. The
-/// host's sequence numbers are shared by frames and commands.
+/// Encodes a message as one wire frame (COBS, CRC, delimiter), nothing more.
+pub fn frame_bytes(msg: &Message) -> Result<Vec<u8>, PerformError> {
+    let mut buf = [0u8; MAX_FRAME];
+    let frame = wire::encode(msg, &mut buf).map_err(PerformError::Wire)?;
+    Ok(frame.to_vec())
+}
+
+/// How tracker frames travel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+pub enum Framing {
+    /// The compact frame (tag 7): quantized, 7 + 11 bytes per sensor of
+    /// payload. A frame with a position outside its ±4 m goes as `f32`.
+    #[default]
+    Compact,
+    /// The `f32` frame (tag 1), 29 bytes per sensor.
+    F32,
+}
+
+/// The message carrying `frame` as `framing` says (`f32` where the compact
+/// frame cannot carry it: a position outside ±4 m).
+#[must_use]
+pub fn tracker_message(frame: &TrackerFrame, framing: Framing) -> Message {
+    match framing {
+        Framing::Compact => match CompactFrame::pack(frame) {
+            Ok(c) => Message::CompactFrame(c),
+            Err(_) => Message::TrackerFrame(*frame),
+        },
+        Framing::F32 => Message::TrackerFrame(*frame),
+    }
+}
+
+/// The session for a recording: `Hello`, `Arm`, the frames, `Disarm`, the
+/// tracker frames compact ([`session_with`] chooses). The host's sequence
+/// numbers are shared by frames and commands.
 pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
+    session_with(frames, Framing::Compact)
+}
+
+/// [`session`] with the tracker frames framed as `framing` says. The first
+/// message starts with a `0x00` (the board resynchronises on it); the
+/// others are bare frames, each ending in its delimiter.
+pub fn session_with(frames: &[TrackerFrame], framing: Framing) -> Result<Vec<Sent>, PerformError> {
     let first = frames.first().map_or(0, |f| f.time_us);
     let last = frames.last().map_or(0, |f| f.time_us);
     let n = u32::try_from(frames.len()).unwrap_or(u32::MAX);
@@ -201,7 +238,7 @@ pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
         },
         Sent {
             time_us: first,
-            bytes: encode(&Message::Command(Command {
+            bytes: frame_bytes(&Message::Command(Command {
                 seq: 0,
                 kind: CommandKind::Arm,
             }))?,
@@ -210,7 +247,7 @@ pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
     for f in frames {
         out.push(Sent {
             time_us: f.time_us,
-            bytes: encode(&Message::TrackerFrame(*f))?,
+            bytes: frame_bytes(&tracker_message(f, framing))?,
         });
     }
     let disarm = Command {
@@ -219,7 +256,7 @@ pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
     };
     out.push(Sent {
         time_us: last,
-        bytes: encode(&Message::Command(disarm))?,
+        bytes: frame_bytes(&Message::Command(disarm))?,
     });
     Ok(out)
 }
@@ -281,7 +318,7 @@ pub fn simulate_with(
     session: &[Sent],
     observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
 ) -> Result<Run, PerformError> {
-    replay(region_bytes, session, &[], observe).map(|(run, _)| run)
+    replay(region_bytes, session, None, observe).map(|(run, _)| run)
 }
 
 /// Every servo output of a native run in the order a board sends them
@@ -290,7 +327,7 @@ pub fn simulate_outputs(
     region_bytes: &[u8],
     session: &[Sent],
 ) -> Result<Vec<Vec<u16>>, PerformError> {
-    let (_, outputs) = replay(region_bytes, session, &[], &mut |_, _| {})?;
+    let (_, outputs) = replay(region_bytes, session, None, &mut |_, _| {})?;
     Ok(outputs.into_iter().map(|o| o.2).collect())
 }
 
@@ -299,21 +336,23 @@ pub fn simulate_outputs(
 /// easing after it), whether a tracker frame drove it, and the targets.
 type Output = (usize, bool, Vec<u16>);
 
-/// [`simulate_with`] with fail-safe trips forced: `trips` holds
-/// `(message index, ticks)`, and each of those ticks runs just before that
-/// message with the board clock at the fail-safe time-out or later (as a
-/// board whose host stalled sees it). Also returns every output in order.
+/// [`simulate_with`], or with the board's fail-safe trips instead of the
+/// replay's own: `trips` holds `(message index, ticks)`, and each of those
+/// ticks runs just before that message with the board clock at the
+/// fail-safe time-out or later (as a board whose host stalled sees it);
+/// while armed the replay's clock then ticks nothing of its own. Also
+/// returns every output in order.
 fn replay(
     region_bytes: &[u8],
     session: &[Sent],
-    trips: &[(usize, u32)],
+    trips: Option<&[(usize, u32)]>,
     observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
 ) -> Result<(Run, Vec<Output>), PerformError> {
     let region = Region::parse(region_bytes);
     let timeout_us = region.rig.as_ref().map_or(0, |r| r.failsafe_timeout_ms());
     let timeout_us = timeout_us.saturating_mul(1000);
     let mut solver = SolverState::new();
-    let mut performer = Performer::new(&region, &mut solver).ok_or(PerformError::NoRig)?;
+    let mut performer = Performer::new(&region, &mut solver);
     let format = ServoFormat::of_region(region_bytes, performer.targets().len());
     let wire = |targets: &[u16]| match &format {
         Some(f) => f.wire(targets),
@@ -331,10 +370,17 @@ fn replay(
             && sent.time_us.wrapping_sub(clock) < u32::MAX / 2
         {
             clock = clock.wrapping_add(period);
-            let update = performer.tick(clock);
-            step(&performer, update);
+            if trips.is_none() || !performer.armed() {
+                let update = performer.tick(clock);
+                step(&performer, update);
+            }
         }
-        let forced = trips.iter().filter(|t| t.0 == i).map(|t| t.1).sum::<u32>();
+        let forced = trips
+            .unwrap_or(&[])
+            .iter()
+            .filter(|t| t.0 == i)
+            .map(|t| t.1)
+            .sum::<u32>();
         for k in 0..forced {
             let late = timeout_us.wrapping_add(k.wrapping_mul(period));
             let update = performer.tick(sent.time_us.wrapping_add(late));
@@ -404,131 +450,104 @@ pub struct Followed {
     /// The native run, with the trips.
     pub run: Run,
     /// The trips followed: `(session message index, ticks)`, each a run of
-    /// easing steps the board took just before that message.
+    /// fail-safe ticks the board reported just before that message.
     pub trips: Vec<(usize, u32)>,
+    /// Trips the board reported that no message of the session ended (not
+    /// followed).
+    pub unplaced: usize,
     /// Outputs compared: up to the last frame-driven one (the easing after
     /// the session is not compared).
     pub compared: usize,
-    /// The outputs compared that still differ from the board's, or that the
+    /// The outputs compared that differ from the board's, or that the
     /// board did not send.
     pub mismatches: usize,
 }
 
-/// Most fail-safe trips [`follow`] looks for.
-const MAX_TRIPS: usize = 64;
-
-/// A replay with these trips, and where its outputs first differ from the
-/// board's (up to its last frame-driven output).
-struct Attempt {
-    run: Run,
-    outputs: Vec<Output>,
-    first: Option<usize>,
+/// The sequence number of each session message that carries one (compact
+/// frames' extended as the board extends them).
+fn session_seqs(session: &[Sent]) -> Vec<Option<u32>> {
+    let mut last = None;
+    session
+        .iter()
+        .map(|sent| {
+            let seq = decode_replies(&sent.bytes)
+                .iter()
+                .find_map(|m| message_seq(m, last));
+            if seq.is_some() {
+                last = seq;
+            }
+            seq
+        })
+        .collect()
 }
 
-fn attempt(
-    region_bytes: &[u8],
-    session: &[Sent],
-    trips: &[(usize, u32)],
-    board: &[Vec<u16>],
-) -> Result<Attempt, PerformError> {
-    let (run, outputs) = replay(region_bytes, session, trips, &mut |_, _| {})?;
-    let span = compared(&outputs);
-    let first = (0..span).find(|&k| board.get(k) != outputs.get(k).map(|o| &o.2));
-    Ok(Attempt {
-        run,
-        outputs,
-        first,
-    })
+/// The host sequence number a message carries, if any.
+fn message_seq(msg: &Message, last: Option<u32>) -> Option<u32> {
+    match msg {
+        Message::TrackerFrame(f) => Some(f.seq),
+        Message::Params(p) => Some(p.seq),
+        Message::Command(c) => Some(c.seq),
+        Message::CompactFrame(c) => Some(wire::compact::extend_seq(last, c.seq16())),
+        _ => None,
+    }
 }
 
-/// The outputs compared: up to the last frame-driven one.
-fn compared(outputs: &[Output]) -> usize {
-    outputs.iter().rposition(|o| o.1).map_or(0, |k| k + 1)
+/// The fail-safe trips the board reported in its telemetry, in order: each
+/// `Telemetry` whose trip count went up carries the last trip that ended
+/// (the board sends one right after the frame that ends a trip).
+#[must_use]
+pub fn reported_trips(replies: &[Message]) -> Vec<Trip> {
+    let mut seen = 0;
+    let mut out = Vec::new();
+    for m in replies {
+        if let Message::Telemetry(t) = m
+            && t.trips > seen
+            && t.last_trip.ticks > 0
+        {
+            seen = t.trips;
+            if out.last() != Some(&t.last_trip) {
+                out.push(t.last_trip);
+            }
+        }
+    }
+    out
 }
 
 /// Replays `session` natively against the board's servo outputs `board`
-/// (all of them, in order), following the board's fail-safe trips.
-///
-/// The board's clock is real: a host that stalls longer than the rig's
-/// fail-safe time-out makes the board ease towards rest in the middle of a
-/// stream, rightly. Where the outputs first differ, the replay tries easing
-/// ticks just before the message that output came from (1, 2, 4, … ticks;
-/// too many show how many); it keeps them only if the replay then matches
-/// the board past the easing and the frame after it, bit for bit. Anything
-/// else is a real mismatch, and counted.
+/// (all of them, in order), following the fail-safe trips the board
+/// reported in `replies` (its telemetry: the message that ended each trip
+/// and how many fail-safe ticks it lasted). The board's clock is real: a
+/// host that stalls longer than the rig's time-out makes it ease towards
+/// rest mid-stream, rightly; the replay runs the same ticks before the same
+/// message and must then match bit for bit. Every output that differs is
+/// a mismatch, and counted.
 pub fn follow(
     region_bytes: &[u8],
     session: &[Sent],
     board: &[Vec<u16>],
+    replies: &[Message],
 ) -> Result<Followed, PerformError> {
+    let seqs = session_seqs(session);
     let mut trips = Vec::new();
-    let mut best = attempt(region_bytes, session, &trips, board)?;
-    while let (Some(k), true) = (best.first, trips.len() < MAX_TRIPS) {
-        let Some(&(message, _, _)) = best.outputs.get(k) else {
-            break;
-        };
-        let at = (message, k, compared(&best.outputs));
-        match trip(region_bytes, session, &trips, board, at)? {
-            Some((ticks, found)) => {
-                trips.push((message, ticks));
-                best = found;
-            }
-            None => break,
+    let mut unplaced = 0;
+    for trip in reported_trips(replies) {
+        match seqs.iter().position(|s| *s == Some(trip.seq)) {
+            Some(i) => trips.push((i, trip.ticks)),
+            None => unplaced += 1,
         }
     }
-    let span = compared(&best.outputs);
-    let differ = (0..span)
-        .filter(|&k| board.get(k) != best.outputs.get(k).map(|o| &o.2))
+    let (run, outputs) = replay(region_bytes, session, Some(&trips), &mut |_, _| {})?;
+    let span = outputs.iter().rposition(|o| o.1).map_or(0, |k| k + 1);
+    let mismatches = (0..span)
+        .filter(|&k| board.get(k) != outputs.get(k).map(|o| &o.2))
         .count();
     Ok(Followed {
-        run: best.run,
+        run,
         trips,
+        unplaced,
         compared: span,
-        mismatches: differ,
+        mismatches,
     })
-}
-
-/// The easing ticks before `message` that make the replay match the board
-/// at output `k` and past it, with that replay; `None` if there are none.
-/// `base`: the outputs compared without them.
-fn trip(
-    region_bytes: &[u8],
-    session: &[Sent],
-    trips: &[(usize, u32)],
-    board: &[Vec<u16>],
-    (message, k, base): (usize, usize, usize),
-) -> Result<Option<(u32, Attempt)>, PerformError> {
-    let with = |ticks: u32| {
-        let mut t = trips.to_vec();
-        t.push((message, ticks));
-        attempt(region_bytes, session, &t, board)
-    };
-    let mut ticks = 1u32;
-    while ticks <= 1 << 16 {
-        let a = with(ticks)?;
-        // Easing outputs the ticks added before the frame.
-        let added = compared(&a.outputs).saturating_sub(base);
-        match a.first {
-            // Past the easing and the frame after it: found.
-            None => return Ok(Some((ticks, a))),
-            Some(j) if j > k + added => return Ok(Some((ticks, a))),
-            // Every easing step matched, the frame did not: more.
-            Some(j) if j == k + added => ticks *= 2,
-            // Too many: the board's frame came after `j − k` steps.
-            Some(j) => {
-                let exact = u32::try_from(j.saturating_sub(k)).unwrap_or(0);
-                if exact == 0 || exact >= ticks {
-                    return Ok(None);
-                }
-                let a = with(exact)?;
-                let past = a
-                    .first
-                    .is_none_or(|j| j > k + usize::try_from(exact).unwrap_or(0));
-                return Ok(past.then_some((exact, a)));
-            }
-        }
-    }
-    Ok(None)
 }
 
 /// What the emulated board's servo link carries for a region's rig.

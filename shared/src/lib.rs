@@ -37,6 +37,7 @@ pub mod goal;
 pub mod grid;
 pub mod math;
 pub mod output;
+pub mod perform;
 pub mod pose;
 pub mod region;
 pub mod rig;

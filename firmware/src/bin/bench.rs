@@ -29,7 +29,7 @@ use marionette_core::pose::{LocalPose, Pose};
 use marionette_core::rig::{FeetechSeries, Output, ServoDesc};
 use marionette_core::solve::{self, Method, Solver, SolverState};
 use marionette_core::wire::{
-    self, Command, CommandKind, List, MAX_FRAME, Message, Sensor, TrackerFrame,
+    self, Command, CommandKind, CompactFrame, List, MAX_FRAME, Message, Sensor, TrackerFrame,
 };
 use marionette_firmware::app::{self, BoardPerformer};
 use marionette_firmware::board::qemu::{CmsdkUart, UART1_BASE, exit};
@@ -298,7 +298,8 @@ fn feed(performer: &mut BoardPerformer<'_, '_>, msg: &Message, now_us: u32) {
     }
 }
 
-/// A tracker frame: the right hand circling, left hand and pelvis still.
+/// A tracker frame, compact (as hosts send them by default): the right
+/// hand circling, left hand and pelvis still.
 fn tracker_frame(i: u32) -> Message {
     let a = i as f32 * 0.05;
     let sensor = |id, position| Sensor {
@@ -313,11 +314,15 @@ fn tracker_frame(i: u32) -> Message {
     ));
     let _ = sensors.push(sensor(1, [0.3, -0.2, 0.1]));
     let _ = sensors.push(sensor(2, [0.0, 0.0, 0.0]));
-    Message::TrackerFrame(TrackerFrame {
+    let frame = TrackerFrame {
         seq: i + 1,
         time_us: i * 1000,
         sensors,
-    })
+    };
+    match CompactFrame::pack(&frame) {
+        Ok(c) => Message::CompactFrame(c),
+        Err(_) => Message::TrackerFrame(frame),
+    }
 }
 
 /// The names of a back-end's rows: sending a frame, and the frame with it.
@@ -365,10 +370,11 @@ fn uart_outputs(rig_servos: &[ServoDesc]) -> [(Names, UartServos<CmsdkUart>); 3]
 fn frame_rows(counter: &mut Counter) {
     let region = Region::<{ app::SEGMENTS }>::parse_sized(region::tables());
     let mut solver = SolverState::new();
-    let Some(mut performer) = BoardPerformer::new(&region, &mut solver) else {
+    let mut performer = BoardPerformer::new(&region, &mut solver);
+    if performer.pipeline().is_none() {
         Line::new().str("frame: no rig in the table region").print();
         return;
-    };
+    }
     let servos = region.rig.as_ref().map_or(&[][..], |r| r.servos());
     let mut outputs = uart_outputs(servos);
     feed(

@@ -198,6 +198,10 @@ impl Board for Qemu {
         u32::MAX - reg_read(TIMER0_BASE + 0x04)
     }
 
+    fn cycles_hz(&self) -> u32 {
+        SYSCLK_HZ
+    }
+
     const ENDS_ON_DISARM: bool = true;
 
     fn finish(&mut self, outcome: Outcome) -> ! {
