@@ -40,6 +40,8 @@ enum Command {
     Solve(cmd::solve::Args),
     /// Make a tracker recording (CSV) from a mocap clip: virtual trackers on its joints.
     Record(cmd::record::Args),
+    /// Find a servo's limits from the keyboard on a board (or the emulated one) and write them into the rig file.
+    Calibrate(cmd::calibrate::Args),
 }
 
 fn main() -> ExitCode {
@@ -58,6 +60,7 @@ fn main() -> ExitCode {
         Command::Synth(args) => cmd::synth::run(&args),
         Command::Solve(args) => cmd::solve::run(&args),
         Command::Record(args) => cmd::record::run(&args),
+        Command::Calibrate(args) => cmd::calibrate::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -329,6 +329,12 @@ impl Emulator {
         self.servo_out.take()
     }
 
+    /// Bytes the board has sent on its tracker link so far (and clears
+    /// them).
+    pub fn take_replies(&mut self) -> Vec<u8> {
+        self.tracker_out.take()
+    }
+
     fn remaining(&mut self) -> Result<Duration, QemuError> {
         let left = self.deadline.saturating_duration_since(Instant::now());
         if left.is_zero() {

@@ -2,6 +2,7 @@
 //! `run(&Args) -> Result<(), CmdError>`.
 
 pub mod build;
+pub mod calibrate;
 pub mod demo;
 pub mod emulate;
 pub mod flash;
