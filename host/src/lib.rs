@@ -5,6 +5,7 @@
 //! calls).
 
 pub mod blob;
+pub mod board;
 pub mod build;
 pub mod cmd;
 pub mod flash;
@@ -13,5 +14,6 @@ pub mod import;
 pub mod locate;
 pub mod perform;
 pub mod qemu;
+pub mod refusal;
 pub mod render;
 pub mod rigfile;

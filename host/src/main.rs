@@ -6,7 +6,14 @@ use std::process::ExitCode;
 
 /// Marionette: drive a puppet rig from motion tables and live trackers.
 #[derive(Parser)]
-#[command(name = "marionette", version, about)]
+#[command(
+    name = "marionette",
+    version,
+    about,
+    after_help = "Exit codes: 0 success; 1 error (bad input, I/O, board and native core disagree); \
+                  2 bad command line; 3 the board never armed (its Status reason is printed); \
+                  4 the board stopped on a fault."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -63,7 +70,10 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("marionette: {e}");
-            ExitCode::FAILURE
+            match e.downcast_ref::<marionette_host::refusal::Stop>() {
+                Some(stop) => ExitCode::from(stop.exit_code()),
+                None => ExitCode::FAILURE,
+            }
         }
     }
 }

@@ -21,10 +21,13 @@
 //! (`time_us,ch0..ch15`, µs), `servo_emulated.png`, and `frame_<k>.png`.
 
 use super::CmdError;
+use super::emulate::{BOARD, Compared};
 use super::sim::{self, Inputs};
+use crate::board;
 use crate::build::{self, Built, Progress, spec};
 use crate::import::csv::read_tracker_csv;
 use crate::perform::{self, Pacing, Run};
+use crate::refusal;
 use crate::render::{self, Figure, Mark, PlotOptions, Series};
 use crate::rigfile;
 use glam::{DQuat, DVec3};
@@ -378,27 +381,35 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     std::fs::write(&table_file, &built.blob)
         .map_err(|e| format!("{}: {e}", table_file.display()))?;
     let inputs = inputs(&rig_path, &built.blob, &recording)?;
+    if let Some(stop) = refusal::precheck(BOARD, &inputs.region, &board::EMULATED) {
+        if args.json {
+            let doc = serde_json::json!({ "spec": spec_path.display().to_string(), "board": stop.report() });
+            println!("{}", serde_json::to_string_pretty(&doc)?);
+        }
+        return Err(Box::new(stop));
+    }
     let region = Region::parse(&inputs.region);
     let rig = region.rig.as_ref().ok_or("the rig blob is invalid")?;
-    if region.reason != StatusReason::Ok {
-        return Err(format!(
-            "the board would not arm with {} + {}: {:?}",
-            rig_path.display(),
-            spec_path.display(),
-            region.reason
-        )
-        .into());
-    }
     let tracker_frames = perform::frames(&read_tracker_csv(&recording)?)?;
     let sample = sample_frames(inputs.frames, args.frames);
     let native = native(&inputs, &sample)?;
-    let (board, emulated, _) =
-        super::emulate::compare(&inputs, &args.out, Pacing::AsFastAsPossible)?;
-    let servo_csv = PathBuf::from(&emulated.servo_csv);
+    let Compared {
+        run: board,
+        summary: emulated,
+        stop,
+        ..
+    } = super::emulate::compare(&inputs, &args.out, Pacing::AsFastAsPossible)?;
+    if let Some(stop) = stop {
+        if args.json {
+            println!("{}", serde_json::to_string_pretty(&emulated)?);
+        }
+        return Err(Box::new(stop));
+    }
+    let servo_csv = PathBuf::from(emulated.servo_csv.clone().unwrap_or_default());
     let mut files = vec![
         table_file.display().to_string(),
         args.out.join("region.bin").display().to_string(),
-        emulated.servo_csv.clone(),
+        servo_csv.display().to_string(),
         plot_servos(&servo_csv)?.display().to_string(),
     ];
     for f in draw_frames(rig, &tracker_frames, &native.poses, &args.out)? {

@@ -7,7 +7,8 @@
 
 use super::CmdError;
 use crate::perform::{self, Run};
-use crate::{import, rigfile};
+use crate::refusal::{self, BoardReport, Stop};
+use crate::{board, import, rigfile};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -23,7 +24,7 @@ pub struct Args {
     /// The tracker recording (CSV).
     #[arg(long)]
     pub recording: PathBuf,
-    /// Where to write `servo.csv`.
+    /// The folder to write `servo_sim.csv` into (created if missing).
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
     /// Print the summary as JSON.
@@ -44,8 +45,13 @@ pub struct Summary {
     pub channels: usize,
     /// Lowest and highest target per channel, µs.
     pub ranges_us: Vec<[f64; 2]>,
-    /// The servo CSV written.
-    pub servo_csv: String,
+    /// The servo CSV written (`null` when the loop did not arm).
+    pub servo_csv: Option<String>,
+    /// Whether the loop armed, and if not why (see [`crate::refusal`]).
+    pub board: BoardReport,
+    /// Boards that would refuse this rig, with why (the native loop does
+    /// not model a board's back-ends or capacity).
+    pub boards_refusing: Vec<String>,
 }
 
 /// The inputs of a performance, loaded.
@@ -124,31 +130,69 @@ pub fn ranges(run: &Run) -> Vec<[f64; 2]> {
         .collect()
 }
 
+/// The name of the native loop in messages.
+pub const NATIVE: &str = "the live loop (run natively)";
+
+/// Boards that would refuse the region's rig (segments, back-end, region
+/// size), each with why: the native loop does not model a board.
+#[must_use]
+pub fn boards_refusing(region: &[u8]) -> Vec<String> {
+    board::BOARDS
+        .iter()
+        .filter_map(|b| refusal::region_verdict(b, region))
+        .filter(|v| !v.fits)
+        .map(|v| format!("{}: {}", v.board, v.problems.join("; ")))
+        .collect()
+}
+
+/// Where `--out` puts `name`: `out` must be a folder (created if missing).
+pub fn out_file(out: &Path, name: &str) -> Result<PathBuf, CmdError> {
+    if out.is_file() {
+        return Err(format!(
+            "--out {}: is a file; give the folder to write {name} into",
+            out.display()
+        )
+        .into());
+    }
+    Ok(out.join(name))
+}
+
 /// Runs the session natively and writes the servo curves.
 pub fn run(args: &Args) -> Result<(), CmdError> {
+    let csv = out_file(&args.out, "servo_sim.csv")?;
     let inputs = load(&args.rig, args.tables.as_deref(), &args.recording)?;
     let run = perform::simulate(&inputs.region, &inputs.session)?;
-    let csv = args.out.join("servo_sim.csv");
-    write_servo_csv(&csv, &inputs, &run)?;
+    let stop = refusal::check(NATIVE, &run.replies, &inputs.region, None);
+    if stop.is_none() {
+        write_servo_csv(&csv, &inputs, &run)?;
+    }
     let summary = Summary {
         frames: inputs.frames,
         frame_outputs: run.frame_targets.len(),
         rest_steps: run.rest_targets.len(),
         channels: run.frame_targets.first().map_or(0, Vec::len),
         ranges_us: ranges(&run),
-        servo_csv: csv.display().to_string(),
+        servo_csv: stop.is_none().then(|| csv.display().to_string()),
+        board: stop.as_ref().map_or_else(BoardReport::armed, Stop::report),
+        boards_refusing: boards_refusing(&inputs.region),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
-    } else {
+    } else if stop.is_none() {
         println!(
             "sim: {} frames, {} output frames, {} steps to rest, {} channels; servo curves in {}",
             summary.frames,
             summary.frame_outputs,
             summary.rest_steps,
             summary.channels,
-            summary.servo_csv
+            csv.display()
         );
+        for why in &summary.boards_refusing {
+            eprintln!("note: a board would refuse this rig: {why}");
+        }
     }
-    Ok(())
+    match stop {
+        Some(stop) => Err(Box::new(stop)),
+        None => Ok(()),
+    }
 }
