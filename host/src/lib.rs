@@ -7,6 +7,7 @@
 pub mod blob;
 pub mod board;
 pub mod build;
+pub mod capacity;
 pub mod cmd;
 pub mod flash;
 pub mod icount;
@@ -17,3 +18,4 @@ pub mod qemu;
 pub mod refusal;
 pub mod render;
 pub mod rigfile;
+pub mod save;

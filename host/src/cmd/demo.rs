@@ -79,11 +79,14 @@ pub fn repo_path(p: &Path) -> PathBuf {
     }
 }
 
-/// Builds the table of a spec (no progress bar).
+/// Builds the table of a spec (no progress bar), checking first that the
+/// emulated board's table region can hold it.
 pub fn build_table(spec_path: &Path) -> Result<Built, CmdError> {
     let spec = spec::read(spec_path)?;
+    crate::capacity::check_spec(&spec, Some(&board::EMULATED))?;
     let progress = Progress::new(false);
     let data = build::load(&spec, &progress)?;
+    crate::capacity::check_dataset(&spec, &data, Some(&board::EMULATED))?;
     Ok(build::build(&spec, &data, None, &progress)?)
 }
 
