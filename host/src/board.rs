@@ -2,15 +2,19 @@
 //! how big each one's table region is, how many segments its firmware
 //! holds, and which servo back-ends it drives.
 //!
-//! These are facts of the firmware (`firmware/boards/*/memory.x`,
-//! `firmware/src/app.rs`'s `SEGMENTS`, each board's `Board::supports`),
-//! restated here so that `marionette build`, `rig check` and `inspect` can
-//! say before anything is flashed whether a rig and a table fit a board.
-//! The tests check them against the firmware itself: the emulated board is
-//! booted with rigs of each back-end and of 24 and 25 segments, and must
-//! arm or refuse exactly as [`Board::verdict`] predicts.
+//! The segment capacity is the core's [`FIRMWARE_SEGMENTS`] (the shipped
+//! firmware's `app::SEGMENTS`) and the back-ends are each board's
+//! [`Support`], the very rule the firmware applies when it is asked to
+//! arm; only the table region sizes are restated here (from
+//! `firmware/boards/*/memory.x`, checked by a test), so that
+//! `marionette build`, `rig check` and `inspect` can say before anything
+//! is flashed whether a rig and a table fit a board. The tests boot the
+//! emulated board with rigs of 24 and 25 segments and of each back-end, and
+//! it must arm or refuse exactly as [`Board::verdict`] predicts.
 
-use marionette_core::rig::Output;
+use marionette_core::output::Support;
+use marionette_core::region::FIRMWARE_SEGMENTS;
+use marionette_core::rig::{FeetechSeries, Output, ServoDesc};
 
 /// One board.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -23,10 +27,8 @@ pub struct Board {
     pub table_region: usize,
     /// Most segments of a rig its firmware drives.
     pub segments: usize,
-    /// Servo back-ends (`[output] kind`) it drives.
-    outputs: &'static [&'static str],
-    /// The only Maestro baud rate it drives, if it has one.
-    maestro_baud: Option<u32>,
+    /// The servo back-ends it drives (the firmware's `Board::SUPPORT`).
+    pub support: Support,
 }
 
 /// The emulated board (QEMU `mps2-an386`): table region at `0x0010_0000`.
@@ -34,9 +36,8 @@ pub const EMULATED: Board = Board {
     key: "emulated",
     name: "the emulated board (QEMU mps2-an386)",
     table_region: crate::qemu::TABLE_REGION_LEN,
-    segments: 24,
-    outputs: &["maestro"],
-    maestro_baud: None,
+    segments: FIRMWARE_SEGMENTS,
+    support: Support::EMULATED,
 };
 
 /// The STM32F411 Black Pill: table region in flash sectors 6–7.
@@ -44,25 +45,12 @@ pub const BLACKPILL: Board = Board {
     key: "blackpill",
     name: "the Black Pill (STM32F411)",
     table_region: crate::flash::BLACKPILL.tables.size as usize,
-    segments: 24,
-    outputs: &["maestro"],
-    maestro_baud: Some(115_200),
+    segments: FIRMWARE_SEGMENTS,
+    support: crate::flash::BLACKPILL.support,
 };
 
 /// Every board, emulated first.
 pub const BOARDS: [Board; 2] = [EMULATED, BLACKPILL];
-
-/// The `[output] kind` word of a back-end.
-#[must_use]
-pub fn output_kind(output: &Output) -> &'static str {
-    match output {
-        Output::Pwm { .. } => "pwm",
-        Output::Pca9685 { .. } => "pca9685",
-        Output::Maestro { .. } => "maestro",
-        #[allow(unreachable_patterns)]
-        _ => "other",
-    }
-}
 
 /// Whether a rig fits a board, and why not.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
@@ -84,39 +72,24 @@ impl Board {
         BOARDS.iter().copied().find(|b| b.key == key)
     }
 
-    /// Whether the board's firmware drives this servo back-end.
+    /// Why the board's firmware cannot drive these servos on this back-end
+    /// ([`Support::check`], in words), or `None` if it can.
     #[must_use]
-    pub fn drives(&self, output: &Output) -> bool {
-        let kind = output_kind(output);
-        let baud_ok = match (output, self.maestro_baud) {
-            (Output::Maestro { baud }, Some(only)) => *baud == only,
-            _ => true,
-        };
-        self.outputs.contains(&kind) && baud_ok
+    pub fn refuses(&self, output: &Output, servos: &[ServoDesc]) -> Option<String> {
+        self.support
+            .check(output, servos)
+            .err()
+            .map(|r| format!("[output] {}: {r}", describe_output(output)))
     }
 
-    /// What the board's firmware drives, in words.
-    #[must_use]
-    pub fn drives_text(&self) -> String {
-        self.outputs
-            .iter()
-            .map(|k| match (*k, self.maestro_baud) {
-                ("maestro", Some(b)) => format!("maestro at {b} baud"),
-                ("maestro", None) => "maestro at any baud".to_owned(),
-                (k, _) => k.to_owned(),
-            })
-            .collect::<Vec<_>>()
-            .join(", ")
-    }
-
-    /// Whether a rig of `segments` segments driving `output`, whose rig blob
-    /// is `rig_blob` bytes, with a table of `table` bytes (if any), can arm
-    /// this board.
+    /// Whether a rig of `segments` segments whose `servos` are driven by
+    /// `output`, whose rig blob is `rig_blob` bytes, with a table of `table`
+    /// bytes (if any), can arm this board.
     #[must_use]
     pub fn verdict(
         &self,
         segments: usize,
-        output: &Output,
+        (output, servos): (&Output, &[ServoDesc]),
         rig_blob: usize,
         table: Option<usize>,
     ) -> Verdict {
@@ -127,17 +100,12 @@ impl Board {
                 self.segments
             ));
         }
-        if !self.drives(output) {
-            problems.push(format!(
-                "[output] {} is not a back-end it drives ({})",
-                describe_output(output),
-                self.drives_text()
-            ));
-        }
-        let used = rig_blob.next_multiple_of(4) + table.unwrap_or(0);
+        problems.extend(self.refuses(output, servos));
+        let used = crate::capacity::region_bytes(rig_blob as u64, table.unwrap_or(0) as u64);
+        let used = usize::try_from(used).unwrap_or(usize::MAX);
         if used > self.table_region {
             problems.push(format!(
-                "rig blob {rig_blob} B + table {} B = {used} B exceeds its {} B table region",
+                "rig blob {rig_blob} B + table {} B = a region of {used} B, over its {} B table region",
                 table.unwrap_or(0),
                 self.table_region
             ));
@@ -160,8 +128,14 @@ pub fn describe_output(output: &Output) -> String {
             format!("pca9685 at I2C {i2c_addr:#04x}, {freq_hz} Hz")
         }
         Output::Pwm { freq_hz } => format!("pwm at {freq_hz} Hz"),
-        #[allow(unreachable_patterns)]
-        other => format!("{other:?}"),
+        Output::Dynamixel { baud } => format!("dynamixel at {baud} baud"),
+        Output::Feetech { baud, series } => {
+            let series = match series {
+                FeetechSeries::Sts => "sts",
+                FeetechSeries::Scs => "scs",
+            };
+            format!("feetech ({series}) at {baud} baud")
+        }
     }
 }
 
@@ -178,17 +152,28 @@ mod tests {
 
     #[test]
     fn a_verdict_lists_every_problem() {
-        let pca = Output::Pca9685 {
-            i2c_addr: 0x40,
-            freq_hz: 50,
-        };
-        let v = BLACKPILL.verdict(25, &pca, 5000, Some(300 * 1024));
+        let pwm = Output::Pwm { freq_hz: 50 };
+        let ch12 = [ServoDesc {
+            channel: 12,
+            ..ServoDesc::default()
+        }];
+        // Black Pill: 12 PWM channels (0..12), 24 segments, 256 KiB.
+        let v = BLACKPILL.verdict(25, (&pwm, &ch12), 5000, Some(300 * 1024));
         assert!(!v.fits);
         assert_eq!(v.problems.len(), 3, "{:?}", v.problems);
-        let ok = EMULATED.verdict(13, &Output::default(), 5001, Some(1000));
+        assert!(v.problems[1].contains("channel 12"), "{:?}", v.problems);
+        let ok = EMULATED.verdict(13, (&Output::default(), &[]), 5001, Some(1000));
         assert!(ok.fits, "{:?}", ok.problems);
-        assert_eq!(ok.region_bytes, [5004 + 1000, 1 << 20]);
-        let slow = Output::Maestro { baud: 9600 };
-        assert!(EMULATED.drives(&slow) && !BLACKPILL.drives(&slow));
+        assert_eq!(ok.region_bytes, [36 + 5004 + 1000, 1 << 20]);
+        // 3 Mbaud: 50 MHz / 17 is 1.9 % off; the emulated UART takes any rate.
+        let fast = Output::Maestro { baud: 3_000_000 };
+        assert!(EMULATED.refuses(&fast, &[]).is_none());
+        assert!(
+            BLACKPILL
+                .refuses(&fast, &[])
+                .unwrap()
+                .contains("3000000 baud")
+        );
+        assert!(EMULATED.refuses(&pwm, &[]).unwrap().contains("`pwm`"));
     }
 }

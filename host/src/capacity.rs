@@ -26,10 +26,20 @@ pub fn sample_bytes(grid_samples: u64, segments: u64) -> u64 {
         .saturating_mul(SAMPLE_LEN as u64)
 }
 
-/// Bytes of the region a rig blob and a table take together.
+/// Bytes of the region a rig blob and a table (0: none) take together, laid
+/// out as [`marionette_core::region::write`] does: the directory (one entry
+/// per blob, then its CRC), then each blob at the next 4-aligned offset.
 #[must_use]
 pub fn region_bytes(rig_blob: u64, table: u64) -> u64 {
-    rig_blob.next_multiple_of(4).saturating_add(table)
+    use marionette_core::region::{CRC_LEN, ENTRY_LEN, PREFIX_LEN};
+    let entries = if table > 0 { 2 } else { 1 };
+    let directory = (PREFIX_LEN + ENTRY_LEN * entries + CRC_LEN) as u64;
+    directory
+        .next_multiple_of(4)
+        .saturating_add(rig_blob)
+        .next_multiple_of(4)
+        .saturating_add(table)
+        .next_multiple_of(4)
 }
 
 /// How a table of `table` bytes (with a rig blob of `rig_blob` bytes) fits
@@ -223,7 +233,9 @@ mod tests {
     fn sizes_are_counted_by_hand() {
         // 6 × 6 × 6 grid samples × 13 segments × 12 bytes.
         assert_eq!(sample_bytes(216, 13), 33_696);
-        assert_eq!(region_bytes(5001, 100), 5004 + 100);
+        // MREG prefix 8 + 2 entries of 12 + CRC 4 = 36; 5001 -> 5004; 101 -> 104.
+        assert_eq!(region_bytes(5001, 101), 36 + 5004 + 104);
+        assert_eq!(region_bytes(5001, 0), 24 + 5004);
         assert_eq!(sample_bytes(u64::MAX, 2), u64::MAX);
         let f = fits(300 * 1024, 4000);
         assert_eq!(f.len(), 2);

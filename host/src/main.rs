@@ -47,6 +47,8 @@ enum Command {
     Solve(cmd::solve::Args),
     /// Make a tracker recording (CSV) from a mocap clip: virtual trackers on its joints.
     Record(cmd::record::Args),
+    /// Check a rig file: summary, hash, which boards can drive it, likely slips.
+    Rig(cmd::rig::Args),
 }
 
 fn main() -> ExitCode {
@@ -65,6 +67,7 @@ fn main() -> ExitCode {
         Command::Synth(args) => cmd::synth::run(&args),
         Command::Solve(args) => cmd::solve::run(&args),
         Command::Record(args) => cmd::record::run(&args),
+        Command::Rig(args) => cmd::rig::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -951,6 +951,9 @@ mod tests {
             reason: marionette_core::wire::StatusReason::NoTable,
             errors: marionette_core::wire::ErrorCounters::default(),
             frames_ok: 1,
+            request_seq: None,
+            state: marionette_core::wire::State::Unready,
+            trips: 0,
         }))
         .unwrap();
         assert!(!arm_answered(&bytes));

@@ -19,7 +19,7 @@
 //! | [`EXIT_FAULT`] = 4 | the board stopped on a fault: it did not answer, exited with an error, reset or ran past its deadline |
 
 use crate::board::{self, Board};
-use marionette_core::frame::Region;
+use marionette_core::region::{self, EntryKind, Region};
 use marionette_core::rig::Rig;
 use marionette_core::table::{Kind, Table};
 use marionette_core::wire::{Message, StatusReason};
@@ -99,14 +99,7 @@ pub fn detail(reason: StatusReason, region: &[u8], board: Option<&Board>) -> Opt
                 );
             }
             let (rig, board) = (rig?, board?);
-            (!board.drives(&rig.output())).then(|| {
-                format!(
-                    "the rig's [output] is {}; {} drives {}",
-                    board::describe_output(&rig.output()),
-                    board.key,
-                    board.drives_text()
-                )
-            })
+            board.refuses(&rig.output(), rig.servos())
         }
         StatusReason::RigMismatch => {
             let (rig, t) = (rig?, table?);
@@ -119,7 +112,7 @@ pub fn detail(reason: StatusReason, region: &[u8], board: Option<&Board>) -> Opt
             ))
         }
         StatusReason::RigTooLarge => {
-            let (parsed, _) = Rig::parse(region).ok()?;
+            let (parsed, _) = Rig::parse(blobs(region).0?).ok()?;
             let limit = board.map_or(24, |b| b.segments);
             Some(format!(
                 "the rig has {} segments; the firmware holds {limit}",
@@ -132,12 +125,31 @@ pub fn detail(reason: StatusReason, region: &[u8], board: Option<&Board>) -> Opt
 
 /// The rig (boxed: it is kilobytes) and the table of a region image.
 fn parts(region: &[u8]) -> (Option<Box<Rig<'_>>>, Option<Table<'_>>) {
-    let Ok((rig, rest)) = Rig::parse(region) else {
+    let (rig, table) = blobs(region);
+    let Some(Ok((rig, _))) = rig.map(Rig::parse) else {
         return (None, None);
     };
-    let pad = (4 - (region.len() - rest.len()) % 4) % 4;
-    let table = rest.get(pad..).and_then(|t| Table::parse(t).ok());
+    let table = table.and_then(|t| Table::parse(t).ok());
     (Some(Box::new(rig)), table)
+}
+
+/// The rig blob and table 0's blob of a region, as the core lays it out
+/// ([`marionette_core::region`]: the directory, or the older rig + table).
+#[must_use]
+pub fn blobs(region: &[u8]) -> (Option<&[u8]>, Option<&[u8]>) {
+    if let Ok(dir) = region::directory(region) {
+        let rig = dir.find(EntryKind::RIG, 0).map(|e| e.bytes);
+        let table = dir.find(EntryKind::TABLE, 0).map(|e| e.bytes);
+        return (rig, table);
+    }
+    let Ok((_, rest)) = Rig::parse(region) else {
+        return (None, None);
+    };
+    let rig_len = region.len() - rest.len();
+    let table = region
+        .get(rig_len.next_multiple_of(4)..)
+        .filter(|t| !t.is_empty());
+    (region.get(..rig_len), table)
 }
 
 /// How a session went, from the board's replies.
@@ -201,6 +213,8 @@ pub struct Stop {
     pub board: String,
     /// What went wrong.
     pub problem: Problem,
+    /// Foreseen from the files rather than seen on a running board.
+    pub foreseen: bool,
 }
 
 /// A board's state at the end of a session, for `--json` summaries.
@@ -251,6 +265,16 @@ impl Stop {
                 reason,
                 detail: detail(reason, region, known),
             },
+            foreseen: false,
+        }
+    }
+
+    /// The same stop, foreseen from the files ("would refuse").
+    #[must_use]
+    pub fn foreseen(self) -> Self {
+        Self {
+            foreseen: true,
+            ..self
         }
     }
 
@@ -260,6 +284,7 @@ impl Stop {
         Self {
             board: board.into(),
             problem: Problem::Fault { what: what.into() },
+            foreseen: false,
         }
     }
 
@@ -307,8 +332,13 @@ impl Stop {
                 let detail = detail
                     .as_ref()
                     .map_or_else(String::new, |d| format!(" ({d})"));
+                let verb = if self.foreseen {
+                    "would refuse"
+                } else {
+                    "refused"
+                };
                 format!(
-                    "{} refused to arm: {reason:?}: {what}{detail}.\n  what to do: {advice}",
+                    "{} {verb} to arm: {reason:?}: {what}{detail}.\n  what to do: {advice}",
                     self.board
                 )
             }
@@ -340,11 +370,15 @@ pub fn check(
 /// region size; `None` if the region holds no valid rig.
 #[must_use]
 pub fn region_verdict(board: &Board, region: &[u8]) -> Option<board::Verdict> {
-    let (rig, rest) = Rig::parse(region).ok()?;
-    let rig_len = region.len() - rest.len();
-    let table_len = region.len().saturating_sub(rig_len.next_multiple_of(4));
-    let table = (table_len > 0).then_some(table_len);
-    Some(board.verdict(rig.body().len(), &rig.output(), rig_len, table))
+    let (rig_blob, table) = blobs(region);
+    let rig_blob = rig_blob?;
+    let (rig, _) = Rig::parse(rig_blob).ok()?;
+    Some(board.verdict(
+        rig.body().len(),
+        (&rig.output(), rig.servos()),
+        rig_blob.len(),
+        table.map(<[u8]>::len),
+    ))
 }
 
 /// Why a region would not arm `board` (the core's own check,
@@ -366,7 +400,7 @@ pub fn precheck(name: &str, region: &[u8], board: &Board) -> Option<Stop> {
             Some(board),
         ));
     }
-    if !board.drives(&rig.output()) {
+    if board.refuses(&rig.output(), rig.servos()).is_some() {
         return Some(Stop::refused(
             name,
             StatusReason::Unsupported,
@@ -390,6 +424,9 @@ mod tests {
             reason,
             errors: ErrorCounters::default(),
             frames_ok: 1,
+            request_seq: None,
+            state: marionette_core::wire::State::Unready,
+            trips: 0,
         })
     }
 

@@ -122,8 +122,8 @@ fn the_emulated_board_says_why_it_never_arms() {
     ];
     refused(&args, "NoTable", "--tables");
 
-    // A flipped bit: the CRC; cut short: the CRC too (the length field
-    // still fits the region).
+    // A flipped bit: the CRC; cut short: its bounds (the region's directory
+    // holds the blob's true length, which its header's sizes overrun).
     let mut bad = blob.clone();
     bad[blob.len() / 2] ^= 0x10;
     let bad_crc = dir.path().join("badcrc.bin");
@@ -131,7 +131,7 @@ fn the_emulated_board_says_why_it_never_arms() {
     check(emulate(&bad_crc, &rig), "BadCrc", "inspect");
     let cut = dir.path().join("cut.bin");
     std::fs::write(&cut, &blob[..blob.len() / 2]).unwrap();
-    check(emulate(&cut, &rig), "BadCrc", "inspect");
+    check(emulate(&cut, &rig), "BadBounds", "inspect");
 
     // The region image (rig + table) given as the table.
     let rig_file = rigfile::load(&rig).unwrap();

@@ -50,7 +50,10 @@ fn rig_check_shows_the_hash_and_what_each_board_says() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let hash = format!("{:#018x}", rigfile::load(&path).unwrap().rig_hash());
     assert!(out.contains(&format!("hash {hash}")), "{out}");
-    assert!(out.contains("13 segments, 16 DOFs, 16 servos on maestro at 115200 baud"), "{out}");
+    assert!(
+        out.contains("13 segments, 16 DOFs, 16 servos on maestro at 115200 baud"),
+        "{out}"
+    );
     assert!(out.contains("emulated   can drive it") && out.contains("blackpill  can drive it"));
     assert!(out.contains("0 error(s), 0 warning(s)"), "{out}");
 
@@ -58,12 +61,26 @@ fn rig_check_shows_the_hash_and_what_each_board_says() {
     assert!(o.status.success());
     let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(doc["segments"], 31);
-    for b in doc["boards"].as_array().unwrap() {
-        assert_eq!(b["fits"], false);
-        let problems = b["problems"].to_string();
-        assert!(problems.contains("31 segments") && problems.contains("pwm"), "{problems}");
-    }
-    assert_eq!(doc["warnings"].as_array().unwrap().len(), 1, "one: no servos");
+    // 31 segments fit neither firmware; only the Black Pill has PWM timers.
+    let boards = doc["boards"].as_array().unwrap();
+    let problems = |i: usize| boards[i]["problems"].to_string();
+    assert_eq!(boards[0]["fits"], false);
+    assert!(
+        problems(0).contains("31 segments") && problems(0).contains("`pwm`"),
+        "{}",
+        problems(0)
+    );
+    assert_eq!(boards[1]["fits"], false);
+    assert!(
+        problems(1).contains("31 segments") && !problems(1).contains("pwm"),
+        "{}",
+        problems(1)
+    );
+    assert_eq!(
+        doc["warnings"].as_array().unwrap().len(),
+        1,
+        "one: no servos"
+    );
 }
 
 #[test]
@@ -95,17 +112,36 @@ fn rig_check_finds_unit_and_wiring_slips_with_their_lines() {
     assert_eq!(errors.len(), 1, "{doc}");
     assert_eq!(errors[0]["field"], "servo[3]");
     assert_eq!(errors[0]["line"], line_of(&slip, "channel = 3") - 1);
-    assert!(errors[0]["message"].as_str().unwrap().contains("l_upper_arm.x"));
+    assert!(
+        errors[0]["message"]
+            .as_str()
+            .unwrap()
+            .contains("l_upper_arm.x")
+    );
     let warnings: Vec<(String, u64)> = doc["warnings"]
         .as_array()
         .unwrap()
         .iter()
-        .map(|w| (w["field"].as_str().unwrap().to_owned(), w["line"].as_u64().unwrap()))
+        .map(|w| {
+            (
+                w["field"].as_str().unwrap().to_owned(),
+                w["line"].as_u64().unwrap(),
+            )
+        })
         .collect();
     let want = [
-        ("segment[3].dofs[1]".to_owned(), line_of(&slip, "name = \"l_upper_arm\"") as u64 - 1),
-        ("segment[8].origin".to_owned(), line_of(&slip, "name = \"l_shin\"") as u64 - 1),
-        ("servo[0].angle".to_owned(), line_of(&slip, "angle = [") as u64),
+        (
+            "segment[3].dofs[1]".to_owned(),
+            line_of(&slip, "name = \"l_upper_arm\"") as u64 - 1,
+        ),
+        (
+            "segment[8].origin".to_owned(),
+            line_of(&slip, "name = \"l_shin\"") as u64 - 1,
+        ),
+        (
+            "servo[0].angle".to_owned(),
+            line_of(&slip, "angle = [") as u64,
+        ),
     ];
     assert_eq!(warnings, want, "{doc}");
 }
@@ -116,14 +152,21 @@ fn a_rig_over_the_firmware_capacity_is_named_and_the_board_agrees() {
     let h25 = with_segments(dir.path(), 12);
     let o = marionette(&["rig", "check", s(&h25)]);
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(out.contains("emulated   cannot: 25 segments; its firmware holds at most 24"), "{out}");
+    assert!(
+        out.contains("emulated   cannot: 25 segments; its firmware holds at most 24"),
+        "{out}"
+    );
     // The emulated board itself: it refuses the 25-segment rig at boot.
     let rig = rigfile::load(&h25).unwrap();
     let table = perform::rest_grid(&rig, &[("a", -0.5, 0.5, 3)]).unwrap();
     let table_file = dir.path().join("rest.bin");
     std::fs::write(&table_file, table).unwrap();
     let rec = dir.path().join("rec.csv");
-    std::fs::write(&rec, "time_us,sensor,x,y,z,qw,qx,qy,qz\n0,0,0,1,0,1,0,0,0\n").unwrap();
+    std::fs::write(
+        &rec,
+        "time_us,sensor,x,y,z,qw,qx,qy,qz\n0,0,0,1,0,1,0,0,0\n",
+    )
+    .unwrap();
     let o = marionette(&[
         "emulate",
         "--rig",
@@ -137,7 +180,10 @@ fn a_rig_over_the_firmware_capacity_is_named_and_the_board_agrees() {
     ]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(3), "{err}");
-    assert!(err.contains("RigTooLarge") && err.contains("25 segments"), "{err}");
+    assert!(
+        err.contains("RigTooLarge") && err.contains("25 segments"),
+        "{err}"
+    );
     // 24 segments: both boards can drive it.
     let h24 = with_segments(dir.path(), 11);
     let o = marionette(&["rig", "check", s(&h24)]);
@@ -151,7 +197,11 @@ fn inspect_says_whether_a_rig_and_a_table_arm_together() {
     let (path, text) = humanoid16();
     let rig = rigfile::load(&path).unwrap();
     let table = dir.path().join("rest.bin");
-    std::fs::write(&table, perform::rest_grid(&rig, &[("a", -0.5, 0.5, 3)]).unwrap()).unwrap();
+    std::fs::write(
+        &table,
+        perform::rest_grid(&rig, &[("a", -0.5, 0.5, 3)]).unwrap(),
+    )
+    .unwrap();
     let o = marionette(&["inspect", s(&table), "--rig", s(&path), "--json"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
@@ -167,21 +217,42 @@ fn inspect_says_whether_a_rig_and_a_table_arm_together() {
     );
     assert_eq!(o.status.code(), Some(3), "{err}");
     assert!(out.contains("RigMismatch") && err.contains("would refuse to arm: RigMismatch"));
-    // A PCA9685 rig: the core arms, no board does.
+    // A PCA9685 rig: the core arms, the emulated board has no I2C, the
+    // Black Pill drives it.
     let pca = dir.path().join("pca.toml");
-    let pca_text = text.replace(
-        "kind = \"maestro\"                # Pololu Maestro, compact protocol over UART\nbaud = 115200",
-        "kind = \"pca9685\"\ni2c_addr = 0x40\nfreq_hz = 50",
-    );
-    std::fs::write(&pca, pca_text).unwrap();
+    let maestro = "kind = \"maestro\"                # Pololu Maestro, compact protocol over UART\nbaud = 115200";
+    assert!(text.contains(maestro));
+    std::fs::write(
+        &pca,
+        text.replace(maestro, "kind = \"pca9685\"\ni2c_addr = 0x40\nfreq_hz = 50"),
+    )
+    .unwrap();
     let o = marionette(&["inspect", s(&table), "--rig", s(&pca), "--json"]);
-    assert_eq!(o.status.code(), Some(3));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(doc["arming"]["arms"], true);
     assert_eq!(doc["arming"]["boards"][0]["reason"], "Unsupported");
+    assert_eq!(doc["arming"]["boards"][1]["arms"], true);
+    // On-chip PWM with 16 channels: the Black Pill has 12; no board arms.
+    let pwm = dir.path().join("pwm.toml");
+    std::fs::write(&pwm, text.replace(maestro, "kind = \"pwm\"\nfreq_hz = 50")).unwrap();
+    let o = marionette(&["inspect", s(&table), "--rig", s(&pwm), "--json"]);
+    assert_eq!(
+        o.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["arming"]["boards"][0]["reason"], "Unsupported");
+    let detail = doc["arming"]["boards"][1]["detail"].as_str().unwrap();
+    assert!(detail.contains("channel 12"), "{detail}");
     // A region image is named as one.
     let region = dir.path().join("region.bin");
-    let image = perform::region(&rigfile::to_blob(&rig).unwrap(), Some(&std::fs::read(&table).unwrap()));
+    let image = perform::region(
+        &rigfile::to_blob(&rig).unwrap(),
+        Some(&std::fs::read(&table).unwrap()),
+    );
     std::fs::write(&region, image).unwrap();
     let o = marionette(&["inspect", s(&region)]);
     let err = String::from_utf8_lossy(&o.stderr);
@@ -192,11 +263,27 @@ fn inspect_says_whether_a_rig_and_a_table_arm_together() {
 fn a_json_example_set_built_for_a_rig_file_has_the_rigs_hash() {
     let dir = tempfile::tempdir().unwrap();
     let (rig, _) = humanoid16();
-    // The bundled reach spec's examples, as a JSON example set.
-    let spec = repo().join("data/builds/reach_humanoid16.toml");
+    // A two-example set over humanoid16's segments, in the rig's order.
+    let names = rigfile::load(&rig).unwrap().segment_names().to_vec();
+    let pose = |y: f64| {
+        let segs: Vec<String> = (0..names.len())
+            .map(|i| format!("[0, {}, 0, 1, 0, 0, 0]", y + 0.1 * i as f64))
+            .collect();
+        format!("[{}]", segs.join(", "))
+    };
     let set = dir.path().join("set.json");
-    let o = marionette(&["build", s(&spec), "--examples-out", s(&set), "--quiet"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let quoted: Vec<String> = names.iter().map(|n| format!("{n:?}")).collect();
+    std::fs::write(
+        &set,
+        format!(
+            "{{\n\"segments\": [{}],\n\"axes\": [{{\"name\": \"a\", \"min\": 0, \"max\": 1, \"count\": 2}}],\n\
+             \"examples\": [{{\"params\": [0], \"pose\": {}}}, {{\"params\": [1], \"pose\": {}}}]\n}}\n",
+            quoted.join(", "),
+            pose(0.4),
+            pose(0.5)
+        ),
+    )
+    .unwrap();
     let with_rig = dir.path().join("with_rig.toml");
     std::fs::write(
         &with_rig,
@@ -221,5 +308,8 @@ fn a_json_example_set_built_for_a_rig_file_has_the_rigs_hash() {
     let o = marionette(&["build", s(&with_rig), "-o", s(&table), "--quiet"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1));
-    assert!(err.contains("set.json:") && err.contains("segments") && err.contains("hips"), "{err}");
+    assert!(
+        err.contains("set.json:") && err.contains("segments") && err.contains("hips"),
+        "{err}"
+    );
 }

@@ -211,7 +211,7 @@ pub fn check(rig: &RigFile, text: &str) -> Result<Report, CmdError> {
         rig_blob_bytes: blob.len(),
         boards: BOARDS
             .iter()
-            .map(|b| b.verdict(segments.len(), &desc.output, blob.len(), None))
+            .map(|b| b.verdict(segments.len(), (&desc.output, servos), blob.len(), None))
             .collect(),
         errors,
         warnings,
@@ -350,7 +350,11 @@ impl<'t> Raw<'t> {
         for (si, seg) in self.rig.segment.iter().enumerate() {
             for (di, dof) in seg.get_ref().dofs.iter().enumerate() {
                 if let Some(v) = &dof.limits {
-                    out.extend(slip(v, format!("segment[{si}].dofs[{di}].limits"), "limits"));
+                    out.extend(slip(
+                        v,
+                        format!("segment[{si}].dofs[{di}].limits"),
+                        "limits",
+                    ));
                 }
             }
         }
