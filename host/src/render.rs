@@ -145,7 +145,9 @@ impl Format {
 }
 
 /// Runs a drawing function on the PNG or SVG backend for `$path` and writes
-/// the file. The body is written once and instantiated for both backends.
+/// the file through [`crate::save`]: drawn into a temporary file beside it
+/// (folders made), renamed over `$path` only when complete. The body is
+/// written once and instantiated for both backends.
 macro_rules! with_backend {
     ($format:expr, $path:expr, $size:expr, |$root:ident| $draw:expr) => {{
         let path: &Path = $path;
@@ -153,18 +155,20 @@ macro_rules! with_backend {
             path: path.to_path_buf(),
             reason,
         };
+        let temp = crate::save::temp_beside(path).map_err(|e| fail(e.to_string()))?;
         match $format {
             Format::Png => {
-                let $root = BitMapBackend::new(path, $size).into_drawing_area();
+                let $root = BitMapBackend::new(temp.path(), $size).into_drawing_area();
                 $draw.map_err(fail)?;
-                $root.present().map_err(|e| fail(de(e)))
+                $root.present().map_err(|e| fail(de(e)))?;
             }
             Format::Svg => {
-                let $root = SVGBackend::new(path, $size).into_drawing_area();
+                let $root = SVGBackend::new(temp.path(), $size).into_drawing_area();
                 $draw.map_err(fail)?;
-                $root.present().map_err(|e| fail(de(e)))
+                $root.present().map_err(|e| fail(de(e)))?;
             }
         }
+        crate::save::commit(temp, path).map_err(|e| fail(e.to_string()))
     }};
 }
 

@@ -305,9 +305,10 @@ pub fn to_blob(rig: &RigFile) -> Result<Vec<u8>, RigFileError> {
 /// Writes the rig blob of a rig file to `out`.
 pub fn write_blob(rig: &RigFile, out: &Path) -> Result<(), RigFileError> {
     let blob = to_blob(rig)?;
-    std::fs::write(out, blob).map_err(|source| RigFileError::Io {
+    let file = Path::new(&rig.file);
+    crate::save::save(out, &blob, &[("the rig file", file)]).map_err(|e| RigFileError::Io {
         file: out.display().to_string(),
-        source,
+        source: std::io::Error::other(e.to_string()),
     })
 }
 

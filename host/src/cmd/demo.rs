@@ -92,7 +92,8 @@ pub fn build_table(spec_path: &Path) -> Result<Built, CmdError> {
 
 /// The region image and session of a rig file, a table blob and a recording.
 pub fn inputs(rig: &Path, table: &[u8], recording: &Path) -> Result<Inputs, CmdError> {
-    let rig = rigfile::load(&rigfile::resolve(rig))?;
+    let rig_path = rigfile::resolve(rig);
+    let rig = rigfile::load(&rig_path)?;
     let rig_blob = rigfile::to_blob(&rig)?;
     let samples = read_tracker_csv(recording)?;
     let frames = perform::frames(&samples)?;
@@ -102,6 +103,10 @@ pub fn inputs(rig: &Path, table: &[u8], recording: &Path) -> Result<Inputs, CmdE
         frames: frames.len(),
         times: frames.iter().map(|f| f.time_us).collect(),
         period_us: rig.desc().frame_period_us,
+        sources: vec![
+            ("the rig", rig_path),
+            ("the recording", recording.to_path_buf()),
+        ],
     })
 }
 
@@ -377,12 +382,14 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     let start = Instant::now();
     let (spec_path, rig_path) = (repo_path(&args.spec), repo_path(&args.rig));
     let recording = repo_path(&args.recording);
-    std::fs::create_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
     let built = build_table(&spec_path)?;
     let build_seconds = start.elapsed().as_secs_f64();
     let table_file = args.out.join("reach_humanoid16.bin");
-    std::fs::write(&table_file, &built.blob)
-        .map_err(|e| format!("{}: {e}", table_file.display()))?;
+    crate::save::save(
+        &table_file,
+        &built.blob,
+        &[("the spec", spec_path.as_path())],
+    )?;
     let inputs = inputs(&rig_path, &built.blob, &recording)?;
     if let Some(stop) = refusal::precheck(BOARD, &inputs.region, &board::EMULATED) {
         if args.json {

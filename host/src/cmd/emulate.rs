@@ -109,15 +109,19 @@ fn as_stop(e: PerformError) -> CmdError {
 /// into `out`.
 pub fn compare(inputs: &Inputs, out: &Path, pacing: Pacing) -> Result<Compared, CmdError> {
     let start = Instant::now();
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let region_file = out.join("region.bin");
-    std::fs::write(&region_file, &inputs.region)
-        .map_err(|e| format!("{}: {e}", region_file.display()))?;
+    let sources = inputs.source_list();
+    let region_file = sim::out_file(out, "region.bin")?;
+    crate::save::check(&region_file, &sources)?;
+    // The board boots from a staged copy, kept as `region.bin` only if it
+    // performed: a failed run leaves nothing behind.
+    let staged = crate::save::temp_beside(&region_file)?;
+    std::fs::write(staged.path(), &inputs.region)
+        .map_err(|e| format!("{}: {e}", staged.path().display()))?;
     let native = perform::simulate(&inputs.region, &inputs.session)?;
     let channels = native.frame_targets.first().map_or(1, Vec::len);
     let expected = native.frame_targets.len();
     let (board, raw) = perform::emulate(
-        &region_file,
+        staged.path(),
         &inputs.session,
         channels,
         expected,
@@ -145,6 +149,7 @@ pub fn compare(inputs: &Inputs, out: &Path, pacing: Pacing) -> Result<Compared, 
         let followed = perform::follow(&inputs.region, &inputs.session, &sent, &board.replies)?;
         let csv = out.join("servo_emulated.csv");
         sim::write_servo_csv(&csv, inputs, &board)?;
+        crate::save::commit(staged, &region_file)?;
         (Some(followed), Some(csv.display().to_string()))
     } else {
         (None, None)
@@ -184,11 +189,14 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     } else {
         Pacing::AsFastAsPossible
     };
+    if let Some(path) = &args.raw_servo {
+        crate::save::check(path, &inputs.source_list())?;
+    }
     let Compared {
         summary, raw, stop, ..
     } = compare(&inputs, &args.out, pacing)?;
     if let (Some(path), None) = (&args.raw_servo, &stop) {
-        std::fs::write(path, raw).map_err(|e| format!("{}: {e}", path.display()))?;
+        crate::save::save(path, &raw, &inputs.source_list())?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);

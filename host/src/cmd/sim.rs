@@ -70,6 +70,19 @@ pub struct Inputs {
     pub times: Vec<u32>,
     /// The rig's frame period, µs.
     pub period_us: u32,
+    /// The files these came from (`(what, path)`): outputs never replace them.
+    pub sources: Vec<(&'static str, PathBuf)>,
+}
+
+impl Inputs {
+    /// [`Inputs::sources`] as [`crate::save`] takes them.
+    #[must_use]
+    pub fn source_list(&self) -> Vec<(&str, &Path)> {
+        self.sources
+            .iter()
+            .map(|(w, p)| (*w, p.as_path()))
+            .collect()
+    }
 }
 
 /// Loads the rig, tables and recording into a region image and a session
@@ -85,8 +98,14 @@ pub fn load_with(
     recording: &Path,
     framing: Framing,
 ) -> Result<Inputs, CmdError> {
-    let rig = rigfile::load(&rigfile::resolve(rig))?;
+    let rig_path = rigfile::resolve(rig);
+    let rig = rigfile::load(&rig_path)?;
     let rig_blob = rigfile::to_blob(&rig)?;
+    let mut sources = vec![
+        ("the rig", rig_path),
+        ("the recording", recording.to_path_buf()),
+    ];
+    sources.extend(tables.map(|t| ("the table", t.to_path_buf())));
     let table_blob = match tables {
         Some(t) => Some(std::fs::read(t).map_err(|e| format!("{}: {e}", t.display()))?),
         None => None,
@@ -99,14 +118,12 @@ pub fn load_with(
         frames: frames.len(),
         times: frames.iter().map(|f| f.time_us).collect(),
         period_us: rig.desc().frame_period_us,
+        sources,
     })
 }
 
 /// Writes a run's targets as `time_us,ch0,…` (µs) to `path`.
 pub fn write_servo_csv(path: &Path, inputs: &Inputs, run: &Run) -> Result<(), CmdError> {
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    }
     let channels = run.frame_targets.first().map_or(0, Vec::len);
     let mut text = String::from("time_us");
     for c in 0..channels {
@@ -123,7 +140,11 @@ pub fn write_servo_csv(path: &Path, inputs: &Inputs, run: &Run) -> Result<(), Cm
         }
         text.push('\n');
     }
-    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()).into())
+    Ok(crate::save::save(
+        path,
+        text.as_bytes(),
+        &inputs.source_list(),
+    )?)
 }
 
 /// Per-channel [min, max] of the targets, µs.
