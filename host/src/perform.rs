@@ -5,7 +5,7 @@
 //! A session is the byte stream a tracker bridge sends: `Hello`, `Arm`, one
 //! `TrackerFrame` per recorded time step, and finally `Disarm`. The table
 //! region holds the rig blob and the table blob behind a small directory
-//! ([`region`], the core's [`marionette_core::region`]), exactly as the
+//! ([`region()`], the core's [`marionette_core::region`]), exactly as the
 //! firmware reads it.
 //!
 //! The native run uses each frame's timestamp as the board clock and calls
