@@ -5,7 +5,9 @@
 //! calls).
 
 pub mod blob;
+pub mod board;
 pub mod build;
+pub mod capacity;
 pub mod cmd;
 pub mod flash;
 pub mod icount;
@@ -14,5 +16,7 @@ pub mod link;
 pub mod locate;
 pub mod perform;
 pub mod qemu;
+pub mod refusal;
 pub mod render;
 pub mod rigfile;
+pub mod save;

@@ -324,6 +324,37 @@ impl Emulator {
         Ok(())
     }
 
+    /// Waits at most `within` (and never past the run's deadline) until the
+    /// board's replies satisfy `done`; returns whether they did. Stops
+    /// early if the board exits.
+    pub fn wait_replies_within(
+        &mut self,
+        done: impl Fn(&[u8]) -> bool,
+        within: Duration,
+    ) -> Result<bool, QemuError> {
+        let give_up = Instant::now() + within;
+        loop {
+            if self.tracker_out.check(&done) {
+                return Ok(true);
+            }
+            self.remaining()?;
+            if Instant::now() > give_up || self.child.try_wait()?.is_some() {
+                return Ok(self.tracker_out.check(&done));
+            }
+            thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// A copy of the bytes the board has sent on its tracker link so far.
+    #[must_use]
+    pub fn replies_so_far(&self) -> Vec<u8> {
+        self.tracker_out
+            .0
+            .lock()
+            .map(|v| v.clone())
+            .unwrap_or_default()
+    }
+
     /// Bytes received on the servo bus so far (and clears them).
     pub fn take_servo(&mut self) -> Vec<u8> {
         self.servo_out.take()

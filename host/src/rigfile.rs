@@ -234,14 +234,59 @@ fn named<'a>(desc: &RigDesc<'static>, name: &'a str, segment_names: &'a [String]
     }
 }
 
-/// Reads and checks a rig file.
+/// The largest rig file read, bytes: a full rig of [`MAX_SEGMENTS`]
+/// segments with every comment fits in a few tens of kilobytes.
+pub const MAX_FILE_BYTES: u64 = 1 << 20;
+
+/// Reads and checks a rig file (at most [`MAX_FILE_BYTES`], checked before
+/// it is read).
 pub fn load(path: &Path) -> Result<RigFile, RigFileError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| RigFileError::Io {
+    let io = |source| RigFileError::Io {
         file: file.clone(),
         source,
-    })?;
+    };
+    let len = std::fs::metadata(path).map_err(io)?.len();
+    if len > MAX_FILE_BYTES {
+        return Err(RigFileError::At {
+            file,
+            line: 0,
+            field: "rig".into(),
+            message: format!(
+                "the file is {len} bytes; a rig file is at most {MAX_FILE_BYTES} (a rig holds at most \
+                 {MAX_SEGMENTS} segments)"
+            ),
+        });
+    }
+    let text = std::fs::read_to_string(path).map_err(io)?;
     parse(&text, &file)
+}
+
+/// Counts the `[[segment]]` and `[[servo]]` table headers before the TOML
+/// is parsed, so that a file of far too many is refused before its syntax
+/// tree is built; the line of the first one too many is named.
+fn check_counts(src: &Source<'_>) -> Result<(), RigFileError> {
+    let limits = [("segment", MAX_SEGMENTS), ("servo", MAX_SERVOS)];
+    for (table, most) in limits {
+        let header = format!("[[{table}]]");
+        let mut offset = 0;
+        let mut count = 0;
+        for line in src.text.split_inclusive('\n') {
+            let squeezed: String = line.chars().filter(|c| !c.is_whitespace()).collect();
+            if squeezed.starts_with(&header) {
+                count += 1;
+                if count > most {
+                    return Err(src.err(
+                        &(offset..offset),
+                        format!("{table}[{most}]"),
+                        format!("more than {most} [[{table}]] tables (the most a rig holds)"),
+                    ));
+                }
+            }
+            offset += line.len();
+        }
+    }
+    Ok(())
 }
 
 /// The rig blob of a loaded rig file (see `marionette_core::rig`).
@@ -260,9 +305,10 @@ pub fn to_blob(rig: &RigFile) -> Result<Vec<u8>, RigFileError> {
 /// Writes the rig blob of a rig file to `out`.
 pub fn write_blob(rig: &RigFile, out: &Path) -> Result<(), RigFileError> {
     let blob = to_blob(rig)?;
-    std::fs::write(out, blob).map_err(|source| RigFileError::Io {
+    let file = Path::new(&rig.file);
+    crate::save::save(out, &blob, &[("the rig file", file)]).map_err(|e| RigFileError::Io {
         file: out.display().to_string(),
-        source,
+        source: std::io::Error::other(e.to_string()),
     })
 }
 
@@ -637,6 +683,7 @@ fn describe(i: &Invalid) -> String {
 /// Reads a rig file's text (`file` names it in errors).
 pub fn parse(text: &str, file: &str) -> Result<RigFile, RigFileError> {
     let src = Source { text, file };
+    check_counts(&src)?;
     let raw: RawRig = toml::from_str(text).map_err(|e| src.toml_err(&e))?;
     Builder {
         src: &src,

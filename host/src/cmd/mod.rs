@@ -11,6 +11,7 @@ pub mod inspect;
 pub mod plot;
 pub mod record;
 pub mod render;
+pub mod rig;
 pub mod sim;
 pub mod solve;
 pub mod stream;

@@ -97,10 +97,7 @@ pub fn summarize(
             _ => {}
         }
     }
-    if let Some(dir) = csv.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    }
-    std::fs::write(csv, text).map_err(|e| format!("{}: {e}", csv.display()))?;
+    crate::save::save(csv, text.as_bytes(), &[])?;
     Ok(s)
 }
 
