@@ -16,3 +16,4 @@ pub mod perform;
 pub mod qemu;
 pub mod render;
 pub mod rigfile;
+pub mod sender;
