@@ -11,6 +11,7 @@ pub mod flash;
 pub mod icount;
 pub mod import;
 pub mod link;
+pub mod live;
 pub mod locate;
 pub mod perform;
 pub mod qemu;

@@ -40,6 +40,8 @@ enum Command {
     Solve(cmd::solve::Args),
     /// Make a tracker recording (CSV) from a mocap clip: virtual trackers on its joints.
     Record(cmd::record::Args),
+    /// Perform from a live source (VMC / OSC over UDP) on the emulated or a real board.
+    Live(cmd::live::Args),
 }
 
 fn main() -> ExitCode {
@@ -58,6 +60,7 @@ fn main() -> ExitCode {
         Command::Synth(args) => cmd::synth::run(&args),
         Command::Solve(args) => cmd::solve::run(&args),
         Command::Record(args) => cmd::record::run(&args),
+        Command::Live(args) => cmd::live::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -23,7 +23,8 @@
 
 use crate::link::Link;
 use crate::perform::{Framing, frame_bytes, tracker_message};
-use marionette_core::wire::{Command, CommandKind, Message, TrackerFrame};
+use marionette_core::rig::MAX_PARAMS;
+use marionette_core::wire::{Command, CommandKind, List, Message, Params, TrackerFrame};
 use std::collections::VecDeque;
 use std::io::{ErrorKind, Write};
 use std::sync::{Arc, Condvar, Mutex, PoisonError};
@@ -39,8 +40,11 @@ pub struct Counts {
     pub sent: u64,
     /// Tracker frames replaced by a newer one before they could go.
     pub dropped: u64,
-    /// Bytes written (frames and commands).
+    /// Bytes written (frames, parameters and commands).
     pub bytes: u64,
+    /// `Params` messages written (each the newest values when the link
+    /// was free; older ones are replaced, not queued).
+    pub params_sent: u64,
 }
 
 /// A message that is never dropped.
@@ -57,6 +61,7 @@ enum Control {
 struct Queue {
     controls: VecDeque<Control>,
     frame: Option<TrackerFrame>,
+    params: Option<List<f32, MAX_PARAMS>>,
     counts: Counts,
     /// Frames written, with the sequence numbers they went with.
     sent: Vec<TrackerFrame>,
@@ -120,6 +125,19 @@ impl Sender {
         self.shared.1.notify_all();
     }
 
+    /// Offers parameter values (a `Params` message, sent before the next
+    /// tracker frame); they replace values still waiting.
+    pub fn offer_params(&self, values: &[f32]) {
+        lock(&self.shared).params = List::from_slice(values).ok();
+        self.shared.1.notify_all();
+    }
+
+    /// Takes the tracker frames sent so far (with their sequence numbers),
+    /// for a recording written as it goes.
+    pub fn take_sent(&self) -> Vec<TrackerFrame> {
+        std::mem::take(&mut lock(&self.shared).sent)
+    }
+
     /// What the sender did so far.
     #[must_use]
     pub fn counts(&self) -> Counts {
@@ -141,7 +159,7 @@ impl Sender {
             if q.failed.is_some() {
                 return false;
             }
-            if !q.busy && q.controls.is_empty() && q.frame.is_none() {
+            if !q.busy && q.controls.is_empty() && q.frame.is_none() && q.params.is_none() {
                 return true;
             }
             let left = deadline.saturating_duration_since(Instant::now());
@@ -179,6 +197,7 @@ impl Sender {
 /// What the writer takes next: a control first, else the newest frame.
 enum Next {
     Control(Control),
+    Params(List<f32, MAX_PARAMS>),
     Frame(Box<TrackerFrame>),
 }
 
@@ -194,6 +213,7 @@ fn write_loop<W: Write>(mut port: W, link: Link, framing: Framing, shared: &Shar
         let Some(next) = take(shared) else {
             return;
         };
+        let is_params = matches!(next, Next::Params(_));
         let (bytes, frame) = match next {
             Next::Control(Control::Hello) => {
                 seq = 0;
@@ -204,6 +224,11 @@ fn write_loop<W: Write>(mut port: W, link: Link, framing: Framing, shared: &Shar
             }
             Next::Control(Control::Command(kind)) => {
                 let msg = Message::Command(Command { seq, kind });
+                seq = seq.wrapping_add(1);
+                (frame_bytes(&msg), None)
+            }
+            Next::Params(values) => {
+                let msg = Message::Params(Params { seq, values });
                 seq = seq.wrapping_add(1);
                 (frame_bytes(&msg), None)
             }
@@ -223,6 +248,7 @@ fn write_loop<W: Write>(mut port: W, link: Link, framing: Framing, shared: &Shar
             return;
         }
         q.counts.bytes += bytes.len() as u64;
+        q.counts.params_sent += u64::from(is_params);
         if let Some(f) = frame {
             q.counts.sent += 1;
             q.sent.push(f);
@@ -240,6 +266,10 @@ fn take(shared: &Shared) -> Option<Next> {
         if let Some(c) = q.controls.pop_front() {
             q.busy = true;
             return Some(Next::Control(c));
+        }
+        if let Some(p) = q.params.take() {
+            q.busy = true;
+            return Some(Next::Params(p));
         }
         if let Some(f) = q.frame.take() {
             q.busy = true;

@@ -7,6 +7,7 @@ pub mod emulate;
 pub mod flash;
 pub mod icount;
 pub mod inspect;
+pub mod live;
 pub mod plot;
 pub mod record;
 pub mod render;

@@ -394,9 +394,15 @@ fn print_summary(s: &Summary) {
         100.0 * s.link_bytes_per_s / s.link_capacity_bytes_per_s.max(1.0)
     );
     println!(
-        "board: {} status, {} acks ({} refused), {} telemetry; {} errors counted; state {:?}, \
+        "board: {} status, {} acks ({} refused), {} telemetry; {} errors counted; state {}, \
          {} fail-safe trips",
-        s.statuses, s.acks, s.refused, s.telemetry, s.errors, s.state, s.trips
+        s.statuses,
+        s.acks,
+        s.refused,
+        s.telemetry,
+        s.errors,
+        state_name(s.state),
+        s.trips
     );
     if let Some(t) = s.timing {
         println!("board frame time: {}", timing_line(&t));
@@ -405,6 +411,12 @@ fn print_summary(s: &Summary) {
         "frames sent: {}; telemetry: {}",
         s.sent_csv, s.telemetry_csv
     );
+}
+
+/// The board's last reported state, for a summary line.
+#[must_use]
+pub fn state_name(state: Option<State>) -> String {
+    state.map_or_else(|| "unknown".to_owned(), |s| format!("{s:?}"))
 }
 
 /// The board's frame timing in one line (its counter units).
