@@ -108,8 +108,10 @@
 //! offset = 0.0                   # (default 0; also the value until the address is heard)
 //! ```
 //!
-//! `Params` overrides parameters `0..k` on the board, so `[[live.param]]`
-//! must name each of `0..k` once.
+//! A `[[live.sensor]]` name that is a Unity humanoid bone (`Hips`,
+//! `RightHand`, …; see `host/src/live.rs`) reads that bone; any other name
+//! reads the tracker of that serial. `Params` overrides parameters `0..k`
+//! on the board, so `[[live.param]]` must name each of `0..k` once.
 //!
 //! `[[retarget.joint]]` is the default map (used when a build spec names
 //! none); each `[[retarget.map]]` is a complete alternative map for another

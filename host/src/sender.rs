@@ -394,6 +394,29 @@ mod tests {
     }
 
     #[test]
+    fn params_go_before_the_next_frame_newest_values_only() {
+        let written = Arc::new(Mutex::new(Vec::new()));
+        let port = Stalled {
+            until: Instant::now() + Duration::from_millis(200),
+            written: Arc::clone(&written),
+        };
+        let sender = Sender::spawn(port, Link::Uart { baud: 921_600 }, Framing::F32);
+        sender.hello();
+        sender.offer_params(&[1.0]);
+        sender.offer_params(&[2.0, 3.0]);
+        sender.offer(frame(5));
+        let (counts, _) = sender.finish(Duration::from_secs(5));
+        assert_eq!((counts.params_sent, counts.sent), (1, 1));
+        let got = crate::perform::decode_replies(&written.lock().unwrap());
+        let params = got.iter().find_map(|m| match m {
+            Message::Params(p) => Some((p.seq, p.values.as_slice().to_vec())),
+            _ => None,
+        });
+        assert_eq!(params, Some((0, vec![2.0, 3.0])));
+        assert!(matches!(got.last(), Some(Message::TrackerFrame(f)) if f.seq == 1));
+    }
+
+    #[test]
     fn the_writer_never_writes_faster_than_the_link() {
         let written = Arc::new(Mutex::new(Vec::new()));
         let port = Stalled {

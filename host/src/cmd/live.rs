@@ -362,7 +362,7 @@ pub fn live(
     let (counts, rest) = sender.finish(Duration::from_secs(2));
     recording.append(&rest)?;
     recording.file.flush()?;
-    std::thread::sleep(Duration::from_millis(300));
+    stream::await_disarm(&replies, Duration::from_secs(20));
     let messages = replies.finish();
     if let Some(e) = failed {
         return Err(format!("{port}: the port failed: {e}").into());

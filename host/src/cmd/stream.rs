@@ -284,6 +284,21 @@ pub fn arm(sender: &Sender, replies: &Replies) -> Result<(), CmdError> {
     }
 }
 
+/// Waits (up to `limit`) for the board to acknowledge the `Disarm`: the
+/// board answers in order, so its replies to every frame before it (the
+/// telemetry, with the fail-safe trips) have then arrived, however far
+/// behind a loaded board ran. True if it did.
+pub fn await_disarm(replies: &Replies, limit: Duration) -> bool {
+    // The session's commands are `Arm` (seq 0) and `Disarm` (seq > 0).
+    let acked = replies.wait_for(limit, |m| match m {
+        Message::Ack(a) if a.seq > 0 => Some(()),
+        _ => None,
+    });
+    // The last bytes after the Ack (nothing the session needs).
+    std::thread::sleep(Duration::from_millis(50));
+    acked.is_some()
+}
+
 /// Offers each frame at its recorded time (or, `fast`, as soon as the
 /// last one went); returns the seconds it took.
 fn schedule(sender: &Sender, frames: &[TrackerFrame], fast: bool) -> f64 {
@@ -361,7 +376,7 @@ pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
     sender.command(CommandKind::Disarm);
     let failed = sender.failed();
     let (counts, sent) = sender.finish(Duration::from_secs(2));
-    std::thread::sleep(Duration::from_millis(300));
+    await_disarm(&replies, Duration::from_secs(20));
     let messages = replies.finish();
     if let Some(e) = failed {
         return Err(format!("{}: the port failed: {e}", args.port).into());
