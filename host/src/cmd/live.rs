@@ -387,7 +387,13 @@ pub fn live(
             board,
             region,
             servo,
-        } => Some(check(board, region, servo, &recording.path, &messages)?),
+        } => Some(check(
+            board,
+            (region, servo),
+            &recording.path,
+            args.frame,
+            &messages,
+        )?),
     };
     let summary = Summary {
         listen: listen.to_string(),
@@ -467,15 +473,15 @@ fn listen_loop(
 /// the core run on the recording.
 fn check(
     board: &mut PtyBoard,
-    region: &Path,
-    servo: &Path,
+    (region, servo): (&Path, &Path),
     recording: &Path,
+    framing: Framing,
     replies: &[Message],
 ) -> Result<Checked, CmdError> {
     board.wait(Duration::from_secs(30))?;
     let region_bytes = std::fs::read(region).map_err(|e| format!("{}: {e}", region.display()))?;
     let frames = perform::frames(&crate::import::csv::read_tracker_csv(recording)?)?;
-    let session = perform::session(&frames)?;
+    let session = perform::session_with(&frames, framing)?;
     let native = perform::simulate(&region_bytes, &session)?;
     let channels = native.frame_targets.first().map_or(1, Vec::len);
     let format = perform::ServoFormat::of_region(&region_bytes, channels)
