@@ -100,7 +100,7 @@ fn vmc_over_udp_drives_the_emulated_board_as_sim_on_the_recorded_session() {
         baud: None,
         listen: "127.0.0.1:0".parse().unwrap(),
         allow: vec!["127.0.0.2".parse().unwrap()],
-        silence_ms: 300,
+        silence_ms: 500,
         seconds: None,
         frame: Framing::Compact,
         out: dir.path().join("out"),
@@ -142,7 +142,7 @@ fn vmc_over_udp_drives_the_emulated_board_as_sim_on_the_recorded_session() {
             }
         }
         // Silent longer than --silence-ms, then stop.
-        std::thread::sleep(Duration::from_millis(700));
+        std::thread::sleep(Duration::from_millis(1000));
         stop.store(true, Ordering::Relaxed);
         run.join().unwrap().expect("live runs")
     });
@@ -164,27 +164,29 @@ fn vmc_over_udp_drives_the_emulated_board_as_sim_on_the_recorded_session() {
         summary.board.link_capacity_bytes_per_s,
         summary.board.telemetry
     );
+    assert!(summary.board.disarm_acked);
     assert_eq!(c.offered, 300);
     assert_eq!(c.sent + c.dropped, 300);
     assert!(c.sent >= 100, "{c:?}");
 
-    // The recording is what was sent; its first and last frames are the
-    // recording's first and last steps sent, through VMC and back.
+    // The recording is what was sent: its first frame is one of the first
+    // steps (a busy writer may have had a newer one by then), its last the
+    // last step (nothing came to replace it), through VMC and back.
     let recorded = import::csv::read_tracker_csv(&args.out.join("live.csv")).unwrap();
     let frames = perform::frames(&recorded).unwrap();
     assert_eq!(frames.len() as u64, c.sent);
-    for (frame, step) in [
-        (&frames[0], &steps[0]),
-        (frames.last().unwrap(), &steps[299]),
-    ] {
-        for s in frame.sensors.as_slice() {
-            let want = step.iter().find(|w| w.sensor == s.id).unwrap();
-            let got = DVec3::from(s.position.map(f64::from));
-            assert!((got - want.position).length() < 1e-5, "sensor {}", s.id);
-            let [w, x, y, z] = s.rotation.map(f64::from);
-            assert!(DQuat::from_xyzw(x, y, z, w).dot(want.orientation).abs() > 1.0 - 1e-6);
-        }
-    }
+    let matches = |frame: &marionette_core::wire::TrackerFrame, step: &[TrackerSample]| {
+        frame.sensors.as_slice().len() == 3
+            && frame.sensors.as_slice().iter().all(|s| {
+                let want = step.iter().find(|w| w.sensor == s.id).unwrap();
+                let got = DVec3::from(s.position.map(f64::from));
+                let [w, x, y, z] = s.rotation.map(f64::from);
+                (got - want.position).length() < 1e-5
+                    && DQuat::from_xyzw(x, y, z, w).dot(want.orientation).abs() > 1.0 - 1e-6
+            })
+    };
+    assert!(steps[..10].iter().any(|step| matches(&frames[0], step)));
+    assert!(matches(frames.last().unwrap(), &steps[299]));
 
     // The servo bytes equal the core run on the recorded session.
     let region = std::fs::read(args.out.join("region.bin")).unwrap();

@@ -66,6 +66,7 @@ fn stream_at_1_khz_over_a_pty_drops_frames_never_stalls_and_matches_sim() {
         summary.seconds
     );
     let c = &summary.sender;
+    assert!(summary.disarm_acked);
     assert_eq!(c.offered, 1500);
     assert_eq!(c.sent + c.dropped, c.offered);
     assert!(

@@ -362,7 +362,7 @@ pub fn live(
     let (counts, rest) = sender.finish(Duration::from_secs(2));
     recording.append(&rest)?;
     recording.file.flush()?;
-    stream::await_disarm(&replies, Duration::from_secs(20));
+    let disarm_acked = stream::await_disarm(&replies, Duration::from_secs(20));
     let messages = replies.finish();
     if let Some(e) = failed {
         return Err(format!("{port}: the port failed: {e}").into());
@@ -374,6 +374,7 @@ pub fn live(
         sender: counts,
         seconds,
         sent_csv: recording.path.display().to_string(),
+        disarm_acked,
         ..stream::Summary::default()
     };
     stream::summarize(
@@ -531,6 +532,9 @@ fn print_summary(s: &Summary) {
     );
     if let Some(t) = b.timing {
         println!("board frame time: {}", stream::timing_line(&t));
+    }
+    if !b.disarm_acked {
+        println!("board: no Ack of Disarm within 20 s: its last replies may be missing");
     }
     if let Some(e) = &s.emulated {
         println!(

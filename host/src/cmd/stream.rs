@@ -97,6 +97,9 @@ pub struct Summary {
     pub trips: u32,
     /// The board's last reported frame timing (its counter units).
     pub timing: Option<FrameTiming>,
+    /// Whether the board acknowledged the closing `Disarm` (its replies
+    /// to every frame before it then arrived).
+    pub disarm_acked: bool,
     /// The telemetry CSV written.
     pub telemetry_csv: String,
     /// The recording of the frames sent.
@@ -376,7 +379,7 @@ pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
     sender.command(CommandKind::Disarm);
     let failed = sender.failed();
     let (counts, sent) = sender.finish(Duration::from_secs(2));
-    await_disarm(&replies, Duration::from_secs(20));
+    let disarm_acked = await_disarm(&replies, Duration::from_secs(20));
     let messages = replies.finish();
     if let Some(e) = failed {
         return Err(format!("{}: the port failed: {e}", args.port).into());
@@ -390,6 +393,7 @@ pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
         sender: counts,
         seconds,
         sent_csv: sent_csv.display().to_string(),
+        disarm_acked,
         ..Summary::default()
     };
     summarize(&messages, &mut summary, &args.out.join("telemetry.csv"))?;
@@ -421,6 +425,9 @@ fn print_summary(s: &Summary) {
     );
     if let Some(t) = s.timing {
         println!("board frame time: {}", timing_line(&t));
+    }
+    if !s.disarm_acked {
+        println!("board: no Ack of Disarm within 20 s: its last replies may be missing");
     }
     println!(
         "frames sent: {}; telemetry: {}",
