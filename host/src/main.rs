@@ -51,6 +51,8 @@ enum Command {
     Calibrate(cmd::calibrate::Args),
     /// Check a rig file: summary, hash, which boards can drive it, likely slips.
     Rig(cmd::rig::Args),
+    /// Perform from a live source (VMC / OSC over UDP) on the emulated or a real board.
+    Live(cmd::live::Args),
 }
 
 fn main() -> ExitCode {
@@ -71,6 +73,7 @@ fn main() -> ExitCode {
         Command::Record(args) => cmd::record::run(&args),
         Command::Calibrate(args) => cmd::calibrate::run(&args),
         Command::Rig(args) => cmd::rig::run(&args),
+        Command::Live(args) => cmd::live::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -8,6 +8,7 @@ pub mod emulate;
 pub mod flash;
 pub mod icount;
 pub mod inspect;
+pub mod live;
 pub mod plot;
 pub mod record;
 pub mod render;
