@@ -26,7 +26,7 @@ pub struct Args {
     /// Baud rate of the tracker link (the Black Pill's USART1 runs at 921 600).
     #[arg(long, default_value_t = 921_600)]
     pub baud: u32,
-    /// The tracker recording (CSV).
+    /// The tracker recording (CSV; docs/recording.md).
     #[arg(long)]
     pub recording: PathBuf,
     /// The rig file (for its frame period; the rig itself is in the board's flash).
