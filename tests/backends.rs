@@ -409,3 +409,105 @@ fn every_back_end_keeps_the_slew_and_limit_guarantees() {
     );
     assert_eq!(pca9685::FRAME_HZ_MAX, 400);
 }
+
+// ------------------------------------------------- README's servo hardware
+
+/// README's "Servo hardware" states each back-end's rig-file ranges and the
+/// Black Pill's PWM pins; each stated range is held to the rig validation
+/// (accepted at both ends, refused one step past), and the pin list to the
+/// timer module's table.
+#[test]
+fn readme_servo_hardware_matches_the_code() {
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    let readme = std::fs::read_to_string(format!("{root}/README.md")).unwrap();
+    let hardware = &readme[readme.find("## Servo hardware").expect("the section")..];
+    let rig = humanoid16();
+    let base = rig.desc();
+    // One servo, 1000-2000 (µs or positions): valid on every back-end.
+    let one = base
+        .servos
+        .iter()
+        .find(|s| s.channel == 1)
+        .copied()
+        .unwrap();
+    let valid = |output: Output, channel: u8| {
+        let mut desc: RigDesc<'_> = base;
+        desc.output = output;
+        desc.servos = marionette_core::wire::List::from_slice(&[marionette_core::rig::ServoDesc {
+            channel,
+            id: channel,
+            ..one
+        }])
+        .unwrap();
+        desc.validate().is_ok()
+    };
+    let edges = |what: &str, lo: u32, hi: u32, make: &dyn Fn(u32) -> Output| {
+        assert!(hardware.contains(what), "README states {what}");
+        assert!(
+            valid(make(lo), 1) && valid(make(hi), 1),
+            "{what}: ends accepted"
+        );
+        assert!(
+            !valid(make(lo - 1), 1) && !valid(make(hi + 1), 1),
+            "{what}: past ends refused"
+        );
+    };
+    let f = |v: u32| u16::try_from(v).unwrap();
+    edges("`freq_hz` (50–333)", 50, 333, &|v| Output::Pwm {
+        freq_hz: f(v),
+    });
+    let pca = |v| Output::Pca9685 {
+        i2c_addr: 0x40,
+        freq_hz: f(v),
+    };
+    edges("`freq_hz` (50–400)", 50, 400, &pca);
+    edges("`baud` (300–250,000", 300, 250_000, &|baud| {
+        Output::Maestro { baud }
+    });
+    edges("`baud` (9,600–4,500,000)", 9_600, 4_500_000, &|baud| {
+        Output::Dynamixel { baud }
+    });
+    edges("`baud` (38,400–1,000,000)", 38_400, 1_000_000, &|baud| {
+        Output::Feetech {
+            baud,
+            series: FeetechSeries::Sts,
+        }
+    });
+    assert!(hardware.contains("`i2c_addr` (0x08–0x7F, not 0x70)"));
+    let addr = |a| Output::Pca9685 {
+        i2c_addr: a,
+        freq_hz: 50,
+    };
+    assert!(valid(addr(0x08), 1) && valid(addr(0x7F), 1));
+    assert!(!valid(addr(0x07), 1) && !valid(addr(0x70), 1));
+    // Channels: 16 on a PCA9685, 24 on the others, 12 PWM on the Black Pill.
+    assert!(hardware.contains("`channel` 0–15") && hardware.contains("`channel` (0–23)"));
+    assert!(valid(pca(50), 15) && !valid(pca(50), 16));
+    let maestro = Output::Maestro { baud: 115_200 };
+    assert!(valid(maestro, 23) && !valid(maestro, 24));
+    assert!(hardware.contains("`channel` 0–11 on the Black Pill"));
+    let pwm = Output::Pwm { freq_hz: 50 };
+    let servo = |channel| marionette_core::rig::ServoDesc { channel, ..one };
+    assert!(Support::BLACKPILL.check(&pwm, &[servo(11)]).is_ok());
+    assert!(Support::BLACKPILL.check(&pwm, &[servo(12)]).is_err());
+    // The PWM pins, by timer, as the timer module's table has them.
+    let timers =
+        std::fs::read_to_string(format!("{root}/firmware/src/board/blackpill/timers.rs")).unwrap();
+    for (tim, first) in [("TIM2", 0), ("TIM3", 4), ("TIM4", 8)] {
+        let row = timers
+            .lines()
+            .find(|l| l.contains(&format!("| {tim} CH1, CH2, CH3, CH4 |")))
+            .expect("the timer table row");
+        let pins = row.rsplit('|').nth(1).unwrap().trim();
+        let pins = pins.split(" (").next().unwrap();
+        let stated = format!("{tim} CH1–4: {pins} (channels {first}–{})", first + 3);
+        assert!(hardware.contains(&stated), "README states {stated}");
+    }
+    for fact in [
+        "PB6 = I2C1 SCL, PB7 = I2C1 SDA",
+        "PA2 = USART2 TX",
+        "PA2 = USART2 half-duplex",
+    ] {
+        assert!(hardware.contains(fact), "{fact}");
+    }
+}

@@ -123,20 +123,21 @@ fn a_matching_hello_recovers_from_a_protocol_mismatch() {
 }
 
 /// A version-1 host's `Hello` is accepted: version 2 only appended fields
-/// and a message, so every version-1 host message is valid version 2.
+/// and a message, so every version-1 host message is valid version 2; and
+/// version 3 only appended a command kind, so version-2 hosts are accepted
+/// too.
 #[test]
 fn a_version_1_hello_is_accepted() {
     let mut rx: Receiver = Receiver::new();
-    let got = feed(&mut rx, &hello(1));
+    for v in [1, 2, 3] {
+        let got = feed(&mut rx, &hello(v));
+        assert!(
+            matches!(got[..], [Incoming::Hello { host_version, accepted: true }] if host_version == v),
+            "{v}: {got:?}"
+        );
+    }
     assert!(matches!(
-        got[..],
-        [Incoming::Hello {
-            host_version: 1,
-            accepted: true
-        }]
-    ));
-    assert!(matches!(
-        feed(&mut rx, &hello(3))[..],
+        feed(&mut rx, &hello(4))[..],
         [Incoming::Hello {
             accepted: false,
             ..
@@ -477,4 +478,118 @@ fn board_messages_and_unknown_tags_count_as_decode() {
     assert!(feed(&mut rx, &coded).is_empty());
     assert_eq!(rx.errors().decode, 1);
     assert_eq!(wire::decode_payload(&[0x09]), Err(WireError::Decode));
+}
+
+// ------------------------------------------------------- calibration jog
+
+/// Ticks `p` once per frame period (1 ms) `n` times from `*now`; returns
+/// channel `ch`'s target after each tick.
+fn jog_ticks(p: &mut Performer<'_, '_>, now: &mut u32, ch: usize, n: usize) -> Vec<u16> {
+    (0..n)
+        .map(|_| {
+            *now += 1000;
+            p.tick(*now);
+            p.targets()[ch]
+        })
+        .collect()
+}
+
+/// Checks humanoid16 channel 1's hard limits on a path from `start`: the
+/// rig file's `pulse_us = [1000, 2000]` is 4000..=8000 quarter-µs, and its
+/// `max_speed = 7.0` rad/s over `angle_deg = [-45, 45]` at the 1 ms frame is
+/// 7 · 0.001 · 4000 / (π/2) = 17.8 → 17 quarter-µs per step; `max_accel =
+/// 60` gives 0.15 → 1 quarter-µs per step per step (never below 1).
+fn assert_within_channel_1_limits(start: u16, path: &[u16]) {
+    let mut last = (i32::from(start), 0i32);
+    for (i, &t) in path.iter().enumerate() {
+        assert!(
+            (4000..=8000).contains(&t),
+            "step {i}: {t} outside the range"
+        );
+        let step = i32::from(t) - last.0;
+        assert!(step.abs() <= 17, "step {i}: {step} faster than the servo");
+        assert!(
+            (step - last.1).abs() <= 1,
+            "step {i}: {step} after {}",
+            last.1
+        );
+        last = (i32::from(t), step);
+    }
+}
+
+/// `Jog` (wire spec, Calibration): taken while disarmed; the channel moves
+/// within its calibrated range and slew limits (a target past the range
+/// stops at its end), every other servo stays at rest; `Arm` and a second
+/// channel's jog are refused until target 0 has brought it back to rest.
+#[test]
+fn a_jog_keeps_the_calibrated_range_and_the_slew_limits() {
+    let bytes = region();
+    let region = Region::parse(&bytes);
+    let mut solver = SolverState::new();
+    let mut p = Performer::new(&region, &mut solver);
+    let rest = p.targets().to_vec();
+    // head tilt: rest angle 0 = 1500 µs.
+    assert_eq!(rest[1], 6000);
+    let ack = |r: &[Message]| match r {
+        [Message::Ack(a)] => a.ok,
+        _ => panic!("{r:?}"),
+    };
+    send(&mut p, &hello(PROTOCOL_VERSION), 0);
+    // 0x3FFF µs/4 = 4095.75 µs: far past the rig's 2000 µs.
+    let jog = |seq, channel, target| command(seq, CommandKind::Jog { channel, target });
+    assert!(ack(&send(&mut p, &jog(1, 1, 0x3FFF), 0)));
+    assert!(!ack(&send(&mut p, &jog(2, 2, 6000), 0)), "a second channel");
+    assert!(!ack(&send(&mut p, &jog(3, 20, 6000), 0)), "no servo on 20");
+    assert!(!ack(&send(&mut p, &command(4, CommandKind::Arm), 0)));
+    let mut now = 0;
+    let out = jog_ticks(&mut p, &mut now, 1, 400);
+    assert_within_channel_1_limits(6000, &out);
+    assert_eq!(out[399], 8000, "stops at the end of the range");
+    for (ch, (&t, &r)) in p.targets().iter().zip(&rest).enumerate() {
+        assert!(ch == 1 || t == r, "channel {ch} moved");
+    }
+    // Moved back down below the range, then ended: back to 1500 µs.
+    assert!(ack(&send(&mut p, &jog(5, 1, 100), now)));
+    let down = jog_ticks(&mut p, &mut now, 1, 400);
+    assert_within_channel_1_limits(8000, &down);
+    assert_eq!(down[399], 4000);
+    assert!(ack(&send(&mut p, &jog(6, 1, 0), now)));
+    assert!(!ack(&send(&mut p, &command(7, CommandKind::Arm), now)));
+    let back = jog_ticks(&mut p, &mut now, 1, 400);
+    assert_within_channel_1_limits(4000, &back);
+    assert_eq!(back[399], 6000);
+    assert!(p.resting());
+    assert!(ack(&send(&mut p, &command(8, CommandKind::Arm), now)));
+    assert!(!ack(&send(&mut p, &jog(9, 1, 7000), now)), "armed");
+}
+
+/// A board without a table still jogs (a servo is calibrated before its
+/// tables are built); one that cannot drive the rig's back-end does not;
+/// `Disarm` and a `Hello` end a jog.
+#[test]
+fn a_jog_needs_a_drivable_rig_and_ends_with_disarm_or_hello() {
+    let rig = humanoid16();
+    let bytes = perform::region(&rig_blob(&rig, None), None);
+    let region = Region::parse(&bytes);
+    assert_eq!(region.reason, StatusReason::NoTable);
+    let jog = |seq, target| command(seq, CommandKind::Jog { channel: 1, target });
+    let acked = |r: Vec<Message>| matches!(r.as_slice(), [Message::Ack(a)] if a.ok);
+    for end in [command(2, CommandKind::Disarm), hello(PROTOCOL_VERSION)] {
+        let mut solver = SolverState::new();
+        let mut p = Performer::new(&region, &mut solver);
+        assert!(acked(send(&mut p, &jog(1, 7000), 0)));
+        let mut now = 0;
+        assert_eq!(jog_ticks(&mut p, &mut now, 1, 300)[299], 7000);
+        assert!(!p.resting());
+        send(&mut p, &end, now);
+        let back = jog_ticks(&mut p, &mut now, 1, 300);
+        assert_within_channel_1_limits(7000, &back);
+        assert_eq!(back[299], 6000);
+        assert!(p.resting() && p.settled());
+    }
+    let mut solver = SolverState::new();
+    let mut p = Performer::new(&region, &mut solver);
+    p.refuse(StatusReason::Unsupported);
+    assert!(!acked(send(&mut p, &jog(1, 7000), 0)));
+    assert!(p.tick(1000).outputs.is_none());
 }

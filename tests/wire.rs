@@ -144,6 +144,26 @@ fn command_exact() {
 }
 
 #[test]
+fn jog_exact() {
+    // The spec's example (wire module doc, "Calibration: Jog"):
+    // 03 (Command) 05 (seq) 07 (Jog) 01 (channel) F0 2E (varint 6000:
+    // 6000 = 46·128 + 112, 112|0x80 = F0, 46 = 2E); crc 0xABC9E281
+    // (zlib.crc32), no zero in payload + CRC: one block of 10.
+    check_exact(
+        command(
+            5,
+            CommandKind::Jog {
+                channel: 1,
+                target: 6000,
+            },
+        ),
+        &[
+            0x0B, 0x03, 0x05, 0x07, 0x01, 0xF0, 0x2E, 0x81, 0xE2, 0xC9, 0xAB, 0x00,
+        ],
+    );
+}
+
+#[test]
 fn params_exact() {
     // 02 (Params) 02 (seq) 02 (2 values) 00 00 00 3F (0.5) 00 00 80 BF (-1.0);
     // crc 0x5AC4E997.
@@ -358,6 +378,10 @@ fn message_tags_are_the_contract() {
         },
         CommandKind::Boresight { sensor: 0 },
         CommandKind::RequestStatus,
+        CommandKind::Jog {
+            channel: 0,
+            target: 0,
+        },
     ];
     for (tag, k) in kinds.into_iter().enumerate() {
         let mut out = [0u8; MAX_PAYLOAD];
@@ -675,6 +699,14 @@ fn validation_rejects_bad_values() {
             weight: f32::INFINITY,
         },
         CommandKind::Boresight { sensor: 16 },
+        CommandKind::Jog {
+            channel: 24,
+            target: 6000,
+        },
+        CommandKind::Jog {
+            channel: 0,
+            target: 0x4000,
+        },
     ];
     let bad_params = [[f32::NAN, 0.0], [0.0, f32::INFINITY], [2.0e6, 0.0]];
 
@@ -830,6 +862,8 @@ fn arb_kind() -> impl Strategy<Value = CommandKind> {
             .prop_map(|(goal, weight)| CommandKind::SetGoalWeight { goal, weight }),
         any::<u8>().prop_map(|sensor| CommandKind::Boresight { sensor }),
         Just(CommandKind::RequestStatus),
+        (any::<u8>(), any::<u16>())
+            .prop_map(|(channel, target)| CommandKind::Jog { channel, target }),
     ]
 }
 

@@ -48,8 +48,12 @@ enum Command {
     Solve(cmd::solve::Args),
     /// Make a tracker recording (CSV) from a mocap clip: virtual trackers on its joints.
     Record(cmd::record::Args),
+    /// Find a servo's limits from the keyboard on a board (or the emulated one) and write them into the rig file.
+    Calibrate(cmd::calibrate::Args),
     /// Check a rig file: summary, hash, which boards can drive it, likely slips.
     Rig(cmd::rig::Args),
+    /// Perform from a live source (VMC / OSC over UDP) on the emulated or a real board.
+    Live(cmd::live::Args),
 }
 
 fn main() -> ExitCode {
@@ -68,7 +72,9 @@ fn main() -> ExitCode {
         Command::Synth(args) => cmd::synth::run(&args),
         Command::Solve(args) => cmd::solve::run(&args),
         Command::Record(args) => cmd::record::run(&args),
+        Command::Calibrate(args) => cmd::calibrate::run(&args),
         Command::Rig(args) => cmd::rig::run(&args),
+        Command::Live(args) => cmd::live::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

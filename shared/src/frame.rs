@@ -54,6 +54,19 @@
 //! before the first armed frame, and the next armed frame drives them again
 //! from rest ([`Pipeline::rest_step`]).
 //!
+//! ## Calibration jog
+//!
+//! While disarmed, [`Pipeline::jog`] holds one servo at a target of the
+//! caller's instead of its rest pulse (`marionette calibrate` finds a
+//! servo's limits so; the wire's `Jog` command). The jogged channel moves
+//! through its own [`Slew`] limiter, the one the performance uses, stepping
+//! with [`Pipeline::rest_step`] at the frame period: it never leaves the
+//! channel's calibrated range (a target beyond it stops at its end) and
+//! never moves faster than the servo's speed and acceleration limits.
+//! Ending a jog ([`Pipeline::end_jog`], or a target of 0) eases the channel
+//! back to rest, after which it is the loop's again. A jog counts as
+//! driving the outputs: afterwards the idle policy `Off` releases them.
+//!
 //! ## Capacity
 //!
 //! [`Region`], [`Pipeline`] and the [`SolverState`] the caller lends the
@@ -242,6 +255,16 @@ impl<const N: usize> Correction<N> {
     }
 }
 
+/// A calibration jog of one channel (see [Calibration jog](self#calibration-jog)).
+#[derive(Clone, Copy, Debug)]
+struct Jog {
+    channel: u8,
+    /// Quarter units; the rest target once the jog is ending.
+    target: u16,
+    /// Ending: easing back to rest.
+    ending: bool,
+}
+
 /// The per-frame pipeline of one rig, for at most `N` segments (see the
 /// module doc): map, synthesize, solve, servo.
 pub struct Pipeline<'r, 'a, const N: usize = MAX_SEGMENTS> {
@@ -253,6 +276,8 @@ pub struct Pipeline<'r, 'a, const N: usize = MAX_SEGMENTS> {
     driven: bool,
     /// Whether the outputs were released at rest (the rig's `Idle::Off`).
     released: bool,
+    /// A calibration jog under way.
+    jog: Option<Jog>,
     last_tracker_us: Option<u32>,
     params: [f32; MAX_PARAMS],
     dials: List<f32, MAX_PARAMS>,
@@ -317,6 +342,7 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             resting: true,
             driven: false,
             released: false,
+            jog: None,
             last_tracker_us: None,
             params: [0.0; MAX_PARAMS],
             dials: List::new(),
@@ -416,6 +442,60 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         } else {
             false
         }
+    }
+
+    /// Starts or moves a calibration jog of servo `channel` towards
+    /// `target` (quarter units), or ends it with `target` 0 (see
+    /// [Calibration jog](self#calibration-jog)). False if the rig has no
+    /// servo on `channel` or another channel is jogging. Only while
+    /// disarmed: the caller refuses it otherwise.
+    pub fn jog(&mut self, channel: u8, target: u16) -> bool {
+        let Some(servo) = self.rig.servos().iter().find(|s| s.channel == channel) else {
+            return false;
+        };
+        let rest = quarter_us(servo.rest_us);
+        match &mut self.jog {
+            Some(j) if j.channel != channel => false,
+            Some(j) => {
+                (j.target, j.ending) = if target == 0 {
+                    (rest, true)
+                } else {
+                    (target, false)
+                };
+                true
+            }
+            None if target == 0 => true,
+            None => {
+                self.jog = Some(Jog {
+                    channel,
+                    target,
+                    ending: false,
+                });
+                self.resting = false;
+                self.released = false;
+                self.driven = true;
+                true
+            }
+        }
+    }
+
+    /// Ends a calibration jog, if one is under way: the channel eases back
+    /// to rest.
+    pub fn end_jog(&mut self) {
+        let rig = self.rig;
+        if let Some(j) = &mut self.jog
+            && let Some(servo) = rig.servos().iter().find(|s| s.channel == j.channel)
+        {
+            j.target = quarter_us(servo.rest_us);
+            j.ending = true;
+        }
+    }
+
+    /// Whether a calibration jog is under way (including one easing back
+    /// to rest).
+    #[must_use]
+    pub fn jogging(&self) -> bool {
+        self.jog.is_some()
     }
 
     /// Sets the dials (a `Params` message): they override parameters
@@ -633,9 +713,10 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         self.step_dt = Some(dt);
     }
 
-    /// One rest-ward step of every servo at the frame period. True if any
-    /// target moved; once every servo is at rest and still,
-    /// [`Pipeline::resting`] is true.
+    /// One rest-ward step of every servo at the frame period (a jogged
+    /// channel steps towards its jog target instead). True if any target
+    /// moved; once every servo is at rest and still (and no jog is under
+    /// way), [`Pipeline::resting`] is true.
     pub fn ease_to_rest(&mut self) -> bool {
         let period = self.rig.frame_period_s();
         self.set_step(period);
@@ -647,13 +728,19 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             else {
                 continue;
             };
-            let rest = quarter_us(servo.rest_us);
-            let next = slew.update(rest);
+            let goal = match self.jog {
+                Some(j) if j.channel == servo.channel => j.target,
+                _ => quarter_us(servo.rest_us),
+            };
+            let next = slew.update(goal);
             moved |= next != *t;
-            all_rest &= next == rest && slew.last_step() == 0;
+            all_rest &= next == goal && slew.last_step() == 0;
             *t = next;
         }
-        self.resting = all_rest;
+        if all_rest && self.jog.is_some_and(|j| j.ending) {
+            self.jog = None;
+        }
+        self.resting = all_rest && self.jog.is_none();
         moved
     }
 }

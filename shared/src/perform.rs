@@ -28,9 +28,30 @@
 //!   from `Arm`): each tick drops the solver's correction and eases the
 //!   servos one step to rest. The next accepted tracker frame ends the trip
 //!   and is performed; the trip is reported (see below).
+//! - **Jogging** (disarmed, calibration): a `Jog` command holds one servo
+//!   at a target of the host's (see below); `Arm` is refused until the jog
+//!   has ended.
 //! - A `Hello` with another protocol version disarms and reports
 //!   `ProtocolMismatch` until a matching `Hello`, which clears it (the
 //!   reason is the session's, never latched).
+//!
+//! ## Calibration jog
+//!
+//! `Jog { channel, target }` (quarter-µs, or a bus servo's position × 4) is
+//! accepted (`Ack` ok) only while disarmed, with a rig the board can drive
+//! (its state `Disarmed`, or `Unready` for want of a table: a servo is
+//! calibrated before its tables are built), for a channel of the rig's
+//! servos, and while no other channel is jogging. The channel then moves
+//! one slew step per [`Performer::tick`] (and per tracker frame taken) towards
+//! the target through the same limiter as a performance
+//! ([`Pipeline::jog`]): **never outside the channel's calibrated range**
+//! (the rig's pulse range or bus-servo limits, after trim and reversal: a
+//! target beyond it stops at its end) and **never faster than the servo's
+//! speed and acceleration limits**. Every other servo eases to, or stays
+//! at, rest. Further `Jog`s to the same channel move its target; `Jog`
+//! with target 0, `Disarm` or any `Hello` end the jog: the channel eases
+//! back to rest and is the loop's again. `Arm` is refused while a jog is
+//! under way, including its easing back.
 //!
 //! ## Replies
 //!
@@ -71,7 +92,8 @@ const IDLE_PERIOD_US: u32 = 1000;
 pub enum Cause {
     /// An accepted tracker frame (its sequence number).
     Frame(u32),
-    /// Easing to rest: fail-safe time-out or disarmed.
+    /// Disarmed or timed out: easing to rest, or a calibration jog
+    /// moving its channel.
     Rest,
 }
 
@@ -229,6 +251,8 @@ pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
     /// Why the board cannot arm, from its region or [`Performer::refuse`]
     /// (never `ProtocolMismatch`, which is the session's).
     reason: StatusReason,
+    /// [`Performer::refuse`]d: the board cannot drive this rig's outputs.
+    refused: bool,
     armed: bool,
     period_us: u32,
     timeout_us: u32,
@@ -262,6 +286,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             pipeline,
             receiver: Receiver::new(),
             reason,
+            refused: false,
             armed: false,
             period_us,
             timeout_us: timeout_ms.saturating_mul(1000),
@@ -284,7 +309,11 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         if self.reason == StatusReason::Ok {
             self.reason = reason;
         }
+        self.refused = true;
         self.armed = false;
+        if let Some(pipeline) = &mut self.pipeline {
+            pipeline.end_jog();
+        }
     }
 
     /// The per-frame pipeline, if the region holds a rig.
@@ -430,6 +459,10 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
                 if !accepted {
                     self.disarm();
                 }
+                // A new session: a jog of the last one ends.
+                if let Some(pipeline) = &mut self.pipeline {
+                    pipeline.end_jog();
+                }
                 Update::reply(Message::Status(self.status(None)))
             }
             Incoming::Params(p) => {
@@ -477,6 +510,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         self.armed = false;
         if let Some(pipeline) = &mut self.pipeline {
             pipeline.drop_correction();
+            pipeline.end_jog();
         }
     }
 
@@ -495,7 +529,8 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     fn command(&mut self, c: ValidCommand, now_us: u32) -> Message {
         let ok = match c.kind() {
             CommandKind::Arm => {
-                let ready = self.reason == StatusReason::Ok && self.pipeline.is_some();
+                let ready = self.reason == StatusReason::Ok
+                    && self.pipeline.as_ref().is_some_and(|p| !p.jogging());
                 if ready && !self.armed {
                     self.armed = true;
                     self.last_frame_us = now_us;
@@ -519,8 +554,23 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
                 self.pipeline.as_mut().is_some_and(|p| p.boresight(sensor))
             }
             CommandKind::RequestStatus => return Message::Status(self.status(Some(c.seq()))),
+            CommandKind::Jog { channel, target } => self.jog(channel, target),
         };
         Message::Ack(Ack { seq: c.seq(), ok })
+    }
+
+    /// A `Jog` command (see [Calibration jog](self#calibration-jog)): false
+    /// if refused.
+    fn jog(&mut self, channel: u8, target: u16) -> bool {
+        let drivable = !self.armed
+            && !self.refused
+            && self.reason() != StatusReason::ProtocolMismatch
+            && self.reason != StatusReason::Unsupported;
+        drivable
+            && self
+                .pipeline
+                .as_mut()
+                .is_some_and(|p| p.jog(channel, target))
     }
 
     /// One accepted tracker frame.

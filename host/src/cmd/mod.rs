@@ -2,11 +2,13 @@
 //! `run(&Args) -> Result<(), CmdError>`.
 
 pub mod build;
+pub mod calibrate;
 pub mod demo;
 pub mod emulate;
 pub mod flash;
 pub mod icount;
 pub mod inspect;
+pub mod live;
 pub mod plot;
 pub mod record;
 pub mod render;

@@ -264,6 +264,15 @@ pub fn write_csv_exact<W: std::io::Write>(
     samples: &[TrackerSample],
 ) -> std::io::Result<()> {
     writeln!(out, "{}", HEADER.join(","))?;
+    write_rows_exact(out, samples)
+}
+
+/// [`write_csv_exact`] without the header line: rows to append to a
+/// recording being written as it goes.
+pub fn write_rows_exact<W: std::io::Write>(
+    mut out: W,
+    samples: &[TrackerSample],
+) -> std::io::Result<()> {
     for s in samples {
         let (p, q) = (s.position, s.orientation);
         let exact = |x: f64| f64::from(x as f32).to_string();

@@ -159,6 +159,18 @@ pub enum CommandKind {
     },
     /// Tag 6: answer with a [`Status`].
     RequestStatus,
+    /// Tag 7 (version 3): calibration. While disarmed, move servo `channel`
+    /// towards `target` (quarter-µs, or a bus servo's position × 4); `target`
+    /// 0 ends the jog (the channel eases back to rest). The board keeps the
+    /// channel within its calibrated range and its slew limits, refuses the
+    /// jog while armed or while another channel jogs, and refuses `Arm`
+    /// while a jog is under way (see [`crate::perform`], Calibration jog).
+    Jog {
+        /// Servo channel, `< MAX_SERVOS`.
+        channel: u8,
+        /// Target, quarter units (0: end the jog), `≤ 0x3FFF`.
+        target: u16,
+    },
 }
 
 /// Why the board is (not) ready. Variant order is the wire contract.

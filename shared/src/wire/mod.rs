@@ -1,6 +1,6 @@
 //! The serial wire protocol between the host and the board.
 //!
-//! # Specification (protocol version 2)
+//! # Specification (protocol version 3)
 //!
 //! This is the whole contract: a host can be written from it alone. The
 //! board's behaviour (states, replies, fail-safe) is in
@@ -91,7 +91,8 @@
 //!   (`[w, x, y, z]`) — 29 bytes.
 //! - [`CommandKind`]: 0 `Arm`, 1 `Disarm`, 2 `SelectTable(u8)`,
 //!   3 `SelectClip(u8)`, 4 `SetGoalWeight { goal: u8, weight: f32 }`,
-//!   5 `Boresight { sensor: u8 }`, 6 `RequestStatus`.
+//!   5 `Boresight { sensor: u8 }`, 6 `RequestStatus`,
+//!   7 `Jog { channel: u8, target: u16 }` (v3; calibration, below).
 //! - [`StatusReason`]: 0 `Ok`, 1 `NoTable`, 2 `BadMagic`, 3 `BadVersion`
 //!   (table format), 4 `BadCrc`, 5 `BadBounds`, 6 `ProtocolMismatch`, 7 `NoRig`,
 //!   8 `RigMismatch`, 9 `Unsupported`, 10 `RigTooLarge` (a valid rig with
@@ -110,6 +111,28 @@
 //! Largest payloads: `TrackerFrame` with 16 sensors and 5-byte varints
 //! 1 + 5 + 5 + 1 + 16 × 29 = 476 bytes; `Telemetry` 223; `Status` 64;
 //! `CompactFrame` 7 + 16 × 11 = 183.
+//!
+//! ### Calibration: `Jog`
+//!
+//! `Command { seq, kind: Jog { channel, target } }` moves one servo while
+//! the board is disarmed (`marionette calibrate`). `target` is in the
+//! servo's target units × 4, like `servo_targets`: quarter-µs for a pulse
+//! servo, position × 4 for a bus servo; `0` ends the jog. **The rule:** a
+//! jog can never leave the servo's hard limits. The board moves the channel
+//! through the same slew limiter as a performance, so its target never
+//! leaves the channel's calibrated range (the rig's `pulse_us` or bus
+//! `limits`, after trim and reversal; a target beyond it stops at the end)
+//! and never changes faster than the servo's `max_speed` and `max_accel`
+//! allow. The board answers `Ack { ok: true }` when it takes the jog, and
+//! `ok: false` while armed, when it cannot drive the rig (no rig,
+//! `Unsupported`), for a channel the rig has no servo on, or while another
+//! channel is jogging. `Jog` target 0, `Disarm` or a `Hello` end the jog
+//! (the servo eases back to rest); `Arm` is refused until it is back.
+//! Behaviour in detail: [`crate::perform`].
+//!
+//! `Jog { channel: 1, target: 6000 }` (1500 µs) with `seq` 5: payload
+//! `03 05 07 01 F0 2E` (tag 3, seq 5, kind 7, channel 1, varint 6000),
+//! CRC `0xABC9E281`, frame `0B 03 05 07 01 F0 2E 81 E2 C9 AB 00`.
 //!
 //! ### What the fields mean
 //!
@@ -156,11 +179,12 @@
 //! - sensor ids `< 16` and unique; `|position| ≤ 100 m` (NaN/inf rejected);
 //!   quaternion with `| |q|² − 1 | ≤ 0.1` is renormalised, otherwise rejected;
 //! - params finite with `|v| ≤ 1e6`;
-//! - `SetGoalWeight`: goal `< 8`, `0 ≤ weight ≤ 1e6`; `Boresight`: sensor `< 16`.
+//! - `SetGoalWeight`: goal `< 8`, `0 ≤ weight ≤ 1e6`; `Boresight`: sensor `< 16`;
+//!   `Jog`: channel `< 24`, target `≤ 0x3FFF` (16383, the Maestro's 14 bits).
 //!
 //! ## Versioning
 //!
-//! [`PROTOCOL_VERSION`] is 2. The host opens a session with `Hello`; the board
+//! [`PROTOCOL_VERSION`] is 3. The host opens a session with `Hello`; the board
 //! answers with a `Status` carrying its own version. A board accepts a host
 //! version from [`MIN_PROTOCOL_VERSION`] (1) to its own; on any other it
 //! counts a `version` error, disarms, reports `reason = ProtocolMismatch`,
@@ -180,6 +204,13 @@
 //! (and ignores what follows) gets the version-1 fields unchanged. In every
 //! version `Status.protocol_version` is the payload's second field: bytes
 //! `04` then its varint.
+//!
+//! Version 3 only **appended** the command kind 7 (`Jog`). Every version-1
+//! and version-2 message keeps its bytes, and the board's replies are
+//! unchanged, so a board keeps accepting version-1 and version-2 hosts (which
+//! never send `Jog`). A version-2 board refuses a version-3 `Hello`
+//! (`ProtocolMismatch`) instead of counting each `Jog` as a `decode` error,
+//! so a host learns that its board cannot be jogged before it tries.
 //!
 //! ## Worked example
 //!
@@ -242,15 +273,15 @@ pub use reader::FrameReader;
 pub use receiver::{Incoming, Receiver, Session};
 pub use seq::{STALE_WINDOW, SeqTracker};
 pub use validate::{
-    PARAM_LIMIT, POSITION_LIMIT_M, QUAT_NORM2_TOLERANCE, SensorSample, ValidCommand, ValidParams,
-    ValidTrackerFrame, WEIGHT_LIMIT,
+    JOG_TARGET_MAX, PARAM_LIMIT, POSITION_LIMIT_M, QUAT_NORM2_TOLERANCE, SensorSample,
+    ValidCommand, ValidParams, ValidTrackerFrame, WEIGHT_LIMIT,
 };
 
 use crate::crc::{Crc32, crc32};
 use postcard::ser_flavors::Flavor;
 
 /// The protocol version this crate speaks.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 /// The oldest host version a board accepts: every version-1 host message is
 /// a valid version-2 message (see [Versioning](self#versioning)).
 pub const MIN_PROTOCOL_VERSION: u16 = 1;

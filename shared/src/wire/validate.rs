@@ -7,7 +7,9 @@
 
 use glam::{Quat, Vec3};
 
-use super::message::{Command, CommandKind, MAX_GOALS, MAX_PARAMS, MAX_SENSORS, Params};
+use super::message::{
+    Command, CommandKind, MAX_GOALS, MAX_PARAMS, MAX_SENSORS, MAX_SERVOS, Params,
+};
 use super::message::{Sensor, TrackerFrame};
 use super::{List, WireError};
 use crate::math;
@@ -18,6 +20,8 @@ pub const POSITION_LIMIT_M: f32 = 100.0;
 /// quaternion is renormalised, beyond it the frame is rejected
 /// (`|q|` between about 0.95 and 1.05).
 pub const QUAT_NORM2_TOLERANCE: f32 = 0.1;
+/// Largest `Jog` target, quarter units (the 14 bits the Maestro carries).
+pub const JOG_TARGET_MAX: u16 = 0x3FFF;
 /// Largest accepted `|value|` of a parameter.
 pub const PARAM_LIMIT: f32 = 1.0e6;
 /// Largest accepted goal weight.
@@ -260,7 +264,8 @@ impl ValidCommand {
 
 impl Command {
     /// Checks `SetGoalWeight` (goal `< MAX_GOALS`, `0 ≤ weight ≤
-    /// WEIGHT_LIMIT`) and `Boresight` (sensor `< MAX_SENSORS`). Table and
+    /// WEIGHT_LIMIT`), `Boresight` (sensor `< MAX_SENSORS`) and `Jog`
+    /// (channel `< MAX_SERVOS`, target `≤ JOG_TARGET_MAX`). Table and
     /// clip numbers are checked by whoever owns the tables.
     ///
     /// # Errors
@@ -271,6 +276,9 @@ impl Command {
                 usize::from(goal) < MAX_GOALS && (0.0..=WEIGHT_LIMIT).contains(&weight)
             }
             CommandKind::Boresight { sensor } => usize::from(sensor) < MAX_SENSORS,
+            CommandKind::Jog { channel, target } => {
+                usize::from(channel) < MAX_SERVOS && target <= JOG_TARGET_MAX
+            }
             CommandKind::Arm
             | CommandKind::Disarm
             | CommandKind::SelectTable(_)

@@ -17,10 +17,12 @@
 //! every frame (a register write; the new width starts with the next
 //! period).
 //!
-//! **Power-up**: nothing is driven until the first frame after `Arm`: the
-//! UART stays idle, the PCA9685 is set up with every output full off, the
-//! timers run with compare 0 (pins low). A rig the board cannot drive never
-//! arms (`Unsupported`) and none of this is touched.
+//! **Power-up**: nothing is driven until the first frame after `Arm` (or
+//! the first step of a calibration `Jog`, which drives the rig's outputs
+//! while disarmed): the UART stays idle, the PCA9685 is set up with every
+//! output full off, the timers run with compare 0 (pins low). A rig the
+//! board cannot drive never arms (`Unsupported`), is never jogged, and none
+//! of this is touched.
 
 use core::convert::Infallible;
 

@@ -15,7 +15,8 @@
 //! rate (better than 1 µs per tick over 50–333 Hz), in PWM mode 1 with
 //! preloaded compare registers, so a new pulse width starts with the next
 //! period and never cuts one short. Every compare register is 0 (no pulse)
-//! until the first frame: the pins stay low until the rig is armed.
+//! until the first frame: the pins stay low until the rig is armed (or a
+//! calibration `Jog` drives them).
 
 use embedded_hal::pwm::{ErrorType, SetDutyCycle};
 use marionette_core::output::pwm::TimerSetup;

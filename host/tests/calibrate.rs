@@ -1,0 +1,166 @@
+//! `marionette calibrate` as a terminal program: run in tmux against the
+//! emulated board, driven with `send-keys`, read with `capture-pane`. The
+//! pulses expected on screen are worked from the keys pressed and the rig
+//! file's numbers (humanoid16 channel 1: rest 1500 µs, `pulse_us = [1000,
+//! 2000]`, small step 10 µs, large step 100 µs), and the rig file written
+//! must be the original with exactly the calibrated lines changed.
+//!
+//! Skipped, with a message, only when tmux is not installed (`.ci/setup`
+//! installs it); QEMU is required like every emulated-board test.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+/// A private tmux server (its own socket), killed when dropped.
+struct Tmux {
+    socket: String,
+}
+
+impl Tmux {
+    fn cmd(&self) -> Command {
+        let mut c = Command::new("tmux");
+        c.args(["-u", "-L", &self.socket]);
+        c
+    }
+
+    fn run(&self, args: &[&str]) -> String {
+        let out = self.cmd().args(args).output().expect("tmux runs");
+        assert!(
+            out.status.success(),
+            "tmux {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    }
+
+    fn keys(&self, keys: &[&str]) {
+        let mut args = vec!["send-keys", "-t", "cal"];
+        args.extend(keys);
+        self.run(&args);
+    }
+
+    /// Waits until the screen shows every one of `texts` (a hang guard of
+    /// 120 s, not a timing check); returns the screen.
+    fn wait_for(&self, texts: &[&str]) -> String {
+        let until = Instant::now() + Duration::from_secs(120);
+        loop {
+            let screen = self.run(&["capture-pane", "-p", "-t", "cal"]);
+            if texts.iter().all(|t| screen.contains(t)) {
+                return screen;
+            }
+            assert!(
+                Instant::now() < until,
+                "waiting for {texts:?}, the screen:\n{screen}"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+}
+
+impl Drop for Tmux {
+    fn drop(&mut self) {
+        let _ = self.cmd().arg("kill-server").output();
+    }
+}
+
+fn tmux_installed() -> bool {
+    Command::new("tmux")
+        .arg("-V")
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+/// humanoid16's channel 1 entry, as the shipped file has it.
+const CHANNEL_1: &str = "channel = 1
+joint = \"head\"
+axis = \"x\"
+angle_deg = [-45, 45]           # 90° servo
+pulse_us = [1000, 2000]
+max_speed = 7.0
+max_accel = 60.0
+";
+
+#[test]
+fn calibrate_in_a_terminal_jogs_the_emulated_board_and_writes_the_rig() {
+    if !tmux_installed() {
+        eprintln!(
+            "SKIPPED: tmux is not installed (run .ci/setup); calibrate's terminal test needs it"
+        );
+        return;
+    }
+    // Built here first, so that the tool's own build is a no-op.
+    marionette_host::qemu::build_firmware("perform").expect("firmware builds");
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let original = std::fs::read_to_string(repo.join("rigs/humanoid16.toml")).unwrap();
+    assert!(original.contains(CHANNEL_1));
+    let dir = tempfile::tempdir().unwrap();
+    let rig = dir.path().join("puppet.toml");
+    std::fs::write(&rig, &original).unwrap();
+
+    let tmux = Tmux {
+        socket: format!("marionette-calibrate-{}", std::process::id()),
+    };
+    let line = format!(
+        "'{}' calibrate --rig '{}' --channel 1; echo EXIT=$?; sleep 600",
+        env!("CARGO_BIN_EXE_marionette"),
+        rig.display()
+    );
+    tmux.run(&[
+        "new-session",
+        "-d",
+        "-s",
+        "cal",
+        "-x",
+        "120",
+        "-y",
+        "24",
+        &line,
+    ]);
+    tmux.wait_for(&["channel 1, range 1000 µs..2000 µs", "commanded 1500 µs"]);
+
+    // 1500 + 2·100 + 10.
+    tmux.keys(&["k", "k", "Right"]);
+    tmux.wait_for(&["commanded 1710 µs, on the servo link 1710 µs"]);
+    // Seven more large steps would be 2410: the board's range ends at 2000.
+    tmux.keys(&["Up", "Up", "Up", "Up", "Up", "Up", "Up"]);
+    tmux.wait_for(&[
+        "commanded 2000 µs, on the servo link 2000 µs",
+        "at the rig's limit",
+    ]);
+    tmux.keys(&["Left", "x"]);
+    tmux.wait_for(&["max 1990 µs", "on the servo link 1990 µs"]);
+    // 1990 − 8·100 = 1190.
+    tmux.keys(&["j", "j", "j", "j", "j", "j", "j", "j", "n"]);
+    tmux.wait_for(&[
+        "commanded 1190 µs, on the servo link 1190 µs",
+        "min 1190 µs",
+    ]);
+    // 1190 + 5·10 = 1240.
+    tmux.keys(&["l", "l", "l", "l", "l", "c", "w"]);
+    tmux.wait_for(&["centre 1240 µs", "wrote "]);
+    tmux.keys(&["q"]);
+    tmux.wait_for(&["back to rest", "on the servo link 1500 µs", "EXIT=0"]);
+
+    let written = std::fs::read_to_string(&rig).unwrap();
+    let expected = original.replacen(
+        CHANNEL_1,
+        &CHANNEL_1
+            .replace("[1000, 2000]", "[1190, 1990]")
+            .replace("max_accel = 60.0\n", "max_accel = 60.0\nrest_us = 1240\n"),
+        1,
+    );
+    assert_eq!(written, expected, "only channel 1's limits change");
+    let loaded = marionette_host::rigfile::load(&rig).unwrap();
+    let servo = loaded
+        .desc()
+        .servos
+        .iter()
+        .find(|s| s.channel == 1)
+        .copied()
+        .unwrap();
+    assert_eq!(
+        (servo.pulse_min_us, servo.pulse_max_us, servo.rest_us),
+        (1190.0, 1990.0, 1240.0)
+    );
+}
