@@ -50,7 +50,7 @@ pub struct Args {
     /// The tracker recording (CSV; docs/recording.md).
     #[arg(long)]
     pub recording: PathBuf,
-    /// The rig file (for its frame period; the rig itself is in the board's flash).
+    /// The rig file (docs/rig.md; for its frame period, the rig itself is in the board's flash).
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// Send every frame as soon as the link takes it (nothing dropped, not
