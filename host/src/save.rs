@@ -92,8 +92,17 @@ pub fn temp_beside(path: &Path) -> Result<tempfile::NamedTempFile, SaveError> {
         .map_err(io(&dir))
 }
 
-/// Moves a finished temporary file over `path`.
+/// The permissions a new output file gets: readable by all, writable by
+/// its owner (a temporary file starts private).
+pub const NEW_FILE_MODE: u32 = 0o644;
+
+/// Moves a finished temporary file over `path`, with the permissions of the
+/// file it replaces, or [`NEW_FILE_MODE`].
 pub fn commit(temp: tempfile::NamedTempFile, path: &Path) -> Result<(), SaveError> {
+    use std::os::unix::fs::PermissionsExt;
+    let mode = std::fs::metadata(path).map_or(NEW_FILE_MODE, |m| m.permissions().mode());
+    std::fs::set_permissions(temp.path(), std::fs::Permissions::from_mode(mode))
+        .map_err(io(path))?;
     temp.persist(path).map_err(|e| SaveError::Io {
         path: path.to_path_buf(),
         source: e.error,
@@ -144,6 +153,19 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names, vec![std::ffi::OsString::from("c.txt")]);
+    }
+
+    #[test]
+    fn outputs_are_readable_and_keep_the_mode_they_replace() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.csv");
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        save(&path, b"a", &[]).unwrap();
+        assert_eq!(mode(&path), 0o644);
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+        save(&path, b"b", &[]).unwrap();
+        assert_eq!(mode(&path), 0o600);
     }
 
     #[test]

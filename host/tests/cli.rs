@@ -171,8 +171,8 @@ fn render_draws_a_pose_and_its_goals() {
     let goals = dir.path().join("goals.json");
     std::fs::write(
         &goals,
-        r#"[{"segment": "left_hand", "target": [2.4, 1.2, 0.3], "weight": 10},
-            {"segment": "right_foot", "target": [1.9, 0, 0.2], "weight": 100}]"#,
+        r#"{"goals": [{"segment": "left_hand", "target": [2.4, 1.2, 0.3], "weight": 10},
+            {"segment": "right_foot", "target": [1.9, 0, 0.2], "weight": 100}]}"#,
     )
     .unwrap();
     let out = dir.path().join("posed.svg");

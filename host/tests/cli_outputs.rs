@@ -180,3 +180,49 @@ fn a_failed_emulation_leaves_nothing_behind() {
     assert_eq!(files(&out), Vec::<String>::new());
     assert!(!raw.exists());
 }
+
+#[test]
+fn sim_out_is_the_folder_its_help_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig_path = repo().join("rigs/humanoid16.toml");
+    let rig = marionette_host::rigfile::load(&rig_path).unwrap();
+    let table = dir.path().join("rest.bin");
+    let blob = marionette_host::perform::rest_grid(&rig, &[("a", -0.5, 0.5, 3)]).unwrap();
+    std::fs::write(&table, blob).unwrap();
+    let rec = dir.path().join("rec.csv");
+    std::fs::write(
+        &rec,
+        "time_us,sensor,x,y,z,qw,qx,qy,qz\n0,0,0,1,0,1,0,0,0\n1000,0,0,1,0,1,0,0,0\n",
+    )
+    .unwrap();
+    let sim = |out: &Path| {
+        marionette(&[
+            "sim",
+            "--rig",
+            s(&rig_path),
+            "--tables",
+            s(&table),
+            "--recording",
+            s(&rec),
+            "--out",
+            s(out),
+        ])
+    };
+    // A file: refused, untouched.
+    let file = dir.path().join("servo.csv");
+    std::fs::write(&file, "keep").unwrap();
+    let o = sim(&file);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("is a file"));
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "keep");
+    // A missing folder: made, with servo_sim.csv in it and nothing else.
+    let out = dir.path().join("a/b");
+    let o = sim(&out);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(files(&out), ["servo_sim.csv"]);
+    assert!(
+        std::fs::read_to_string(out.join("servo_sim.csv"))
+            .unwrap()
+            .starts_with("time_us,ch0,")
+    );
+}

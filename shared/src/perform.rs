@@ -155,26 +155,69 @@ impl Timing {
 /// The live loop of one board (see the module doc), for rigs of at most `N`
 /// segments.
 ///
-/// # Example
+/// # Examples
 ///
-/// A board whose table region is erased (no rig): it answers the host's
-/// `Hello` with why it cannot arm, refuses `Arm`, takes tracker frames
-/// without driving anything, and its ticks do nothing.
+/// A one-servo rig (an arm on a post; the servo turns ±90° over 1000 to
+/// 2000 µs, so its rest angle 0 is 1500 µs) flashed without a table: the
+/// board says why it cannot arm, refuses `Arm`, and takes tracker frames
+/// while its servo stays at its rest target (nothing new to send: it starts
+/// there).
 ///
 /// ```
 /// use marionette_core::frame::{NoCycles, Region};
 /// use marionette_core::perform::Performer;
+/// use marionette_core::pose::NO_PARENT;
+/// use marionette_core::region::{self, Entry};
+/// use marionette_core::rig::{
+///     AxisName, DofDesc, Idle, Output, RigDesc, SegmentDesc, ServoDesc,
+/// };
 /// use marionette_core::solve::SolverState;
 /// use marionette_core::wire::{
 ///     Command, CommandKind, Hello, List, MAX_FRAME, Message, PROTOCOL_VERSION, State,
 ///     StatusReason, TrackerFrame, encode,
 /// };
 ///
-/// let erased = [0xFF; 64];
-/// let region = Region::<24>::parse_sized(&erased);
-/// let mut solver = SolverState::<24>::new();
+/// let mut desc = RigDesc::<4> {
+///     name: "arm",
+///     frame_period_us: 1000,
+///     failsafe_timeout_ms: 100,
+///     root_position: [0.0, 1.0, 0.0],
+///     root_rotation: [1.0, 0.0, 0.0, 0.0],
+///     output: Output::Maestro { baud: 115_200 },
+///     idle: Idle::Hold,
+///     segments: List::new(),
+///     servos: List::new(),
+///     params: List::new(),
+///     goals: List::new(),
+/// };
+/// let post = SegmentDesc { name: "post", parent: NO_PARENT, ..SegmentDesc::default() };
+/// let mut dofs = List::new();
+/// dofs.push(DofDesc { axis: AxisName::X, min: -1.5, max: 1.5 }).unwrap();
+/// let arm = SegmentDesc { name: "arm", parent: 0, dofs, ..SegmentDesc::default() };
+/// desc.segments.push(post).unwrap();
+/// desc.segments.push(arm).unwrap();
+/// let half_turn = core::f32::consts::FRAC_PI_2;
+/// desc.servos.push(ServoDesc {
+///     channel: 0,
+///     segment: 1,
+///     angle_min: -half_turn,
+///     angle_max: half_turn,
+///     pulse_min_us: 1000.0,
+///     pulse_max_us: 2000.0,
+///     rest_us: 1500.0,
+///     max_speed: 5.0,
+///     max_accel: 40.0,
+///     ..ServoDesc::default()
+/// }).unwrap();
+/// let mut rig_blob = [0u8; 512];
+/// let n = desc.to_blob(&mut rig_blob).unwrap();
+/// let mut flash = [0u8; 1024];
+/// let n = region::write(&[Entry::rig(&rig_blob[..n])], &mut flash).unwrap();
+///
+/// let region = Region::<4>::parse_sized(&flash[..n]);
+/// let mut solver = SolverState::<4>::new();
 /// let mut board = Performer::new(&region, &mut solver);
-/// let mut send = |board: &mut Performer<'_, '_, 24>, msg: Message, now_us: u32| {
+/// let mut send = |board: &mut Performer<'_, '_, 4>, msg: Message, now_us: u32| {
 ///     let mut buf = [0u8; MAX_FRAME];
 ///     let mut bytes = encode(&msg, &mut buf).unwrap();
 ///     board.receive(&mut bytes, now_us, &mut NoCycles)
@@ -182,7 +225,7 @@ impl Timing {
 ///
 /// let hello = Message::Hello(Hello { protocol_version: PROTOCOL_VERSION });
 /// match send(&mut board, hello, 0).reply {
-///     Some(Message::Status(s)) => assert_eq!(s.reason, StatusReason::NoRig),
+///     Some(Message::Status(s)) => assert_eq!(s.reason, StatusReason::NoTable),
 ///     other => panic!("{other:?}"),
 /// }
 /// let arm = Message::Command(Command { seq: 0, kind: CommandKind::Arm });
@@ -194,10 +237,14 @@ impl Timing {
 ///     let frame = TrackerFrame { seq, time_us: seq * 1000, sensors: List::new() };
 ///     let update = send(&mut board, Message::TrackerFrame(frame), seq * 1000);
 ///     assert_eq!(update.outputs, None);
+///     assert_eq!(board.targets(), &[1500 * 4]); // quarter-µs
 /// }
-/// assert_eq!(board.tick(10_000).outputs, None);
-/// assert_eq!((board.state(), board.armed(), board.targets().len()), (State::Unready, false, 0));
+/// assert_eq!((board.state(), board.armed()), (State::Unready, false));
 /// ```
+///
+/// With a table built for the rig (`marionette build`; the region holds
+/// both), `Arm` is acknowledged and every tracker frame is performed:
+/// [`Update::outputs`] is `Some(Cause::Frame(seq))` ([`Cause`]).
 pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
     pipeline: Option<Pipeline<'r, 'a, N>>,
     receiver: Receiver,

@@ -16,7 +16,7 @@ use crate::capacity;
 /// Arguments of `marionette build`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The build spec (`.toml`), or a JSON example set (`.json`).
+    /// The build spec (`.toml`; docs/spec.md), or a JSON example set (`.json`; docs/example-set.md).
     pub spec: PathBuf,
     /// Where to write the table blob.
     #[arg(short, long)]

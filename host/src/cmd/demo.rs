@@ -43,13 +43,13 @@ use std::time::Instant;
 /// Arguments of `marionette demo`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The table's build spec.
+    /// The table's build spec (docs/spec.md).
     #[arg(long, default_value = "data/builds/reach_humanoid16.toml")]
     pub spec: PathBuf,
-    /// The rig file.
+    /// The rig file (TOML; docs/rig.md), or the name of one in `rigs/`.
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
-    /// The tracker recording (CSV).
+    /// The tracker recording (CSV; docs/recording.md).
     #[arg(long, default_value = "data/recordings/reach_hdm05_007.csv")]
     pub recording: PathBuf,
     /// Where to write the table, servo curves and pictures.

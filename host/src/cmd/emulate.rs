@@ -22,13 +22,13 @@ use std::time::Instant;
 /// Arguments of `marionette emulate`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The rig file.
+    /// The rig file (TOML; docs/rig.md), or the name of one in `rigs/`.
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The table blob (`marionette build`); without it the board does not arm.
     #[arg(long)]
     pub tables: Option<PathBuf>,
-    /// The tracker recording (CSV).
+    /// The tracker recording (CSV; docs/recording.md).
     #[arg(long)]
     pub recording: PathBuf,
     /// Where to write `servo_emulated.csv` and `region.bin`.

@@ -17,18 +17,19 @@
 //! starts from), or a shipped body's through core forward kinematics, lifted
 //! so that its lowest point is on the floor.
 //!
-//! Goals are a JSON list (bare, or as `{"goals": [...]}`) of
-//! `{"segment": "left_hand", "target": [x, y, z], "weight": 10}`; `segment`
-//! may be a name or an index, `weight` defaults to 1, and an optional
-//! `"point": [x, y, z]` (segment frame) replaces the touch point. The
-//! drawing joins the pulled point to the target. This is the goal list of
-//! `marionette solve`'s input (its other keys are ignored).
+//! Goals are a goals file exactly as `marionette solve` reads it
+//! (`docs/goals.md`): `{"goals": [{"segment": "left_hand", "target":
+//! [x, y, z], "weight": 10}]}`, with an optional `"point": [x, y, z]`
+//! (segment frame) instead of the touch point, and an optional `start`
+//! (which only `solve` uses). The drawing joins the pulled point to the
+//! target.
 
 use super::CmdError;
 use crate::render::{self, Camera, Figure, Mark, RenderOptions};
 use crate::rigfile;
 use glam::{DQuat, DVec3};
 use marionette_core::body::{self, Angles, Body};
+use marionette_core::goal::{Attach, Goal, Target};
 use marionette_core::pose::{LocalPose, MAX_SEGMENTS, Pose};
 use marionette_core::rig::Rig;
 use serde::Deserialize;
@@ -76,7 +77,8 @@ pub struct Args {
     /// absent.
     #[arg(long)]
     pub pose: Option<PathBuf>,
-    /// Goals JSON (`[{"segment","target","weight"}]`).
+    /// Goals JSON, as `solve --goals` reads it (`{"goals": [{"segment",
+    /// "target", "weight"}]}`; see docs/goals.md).
     #[arg(long)]
     pub goals: Option<PathBuf>,
     /// Output picture, `.png` or `.svg`.
@@ -115,43 +117,6 @@ pub struct SegmentPlacement {
     pub position: [f64; 3],
     /// Orientation `[w, x, y, z]`.
     pub rotation: [f64; 4],
-}
-
-/// A goal in a goals file.
-#[derive(Debug, Deserialize)]
-pub struct GoalEntry {
-    /// The segment pulled, by name or index.
-    pub segment: SegmentRef,
-    /// Where the point should be (metres, world).
-    #[serde(alias = "location", alias = "position")]
-    pub target: [f64; 3],
-    /// The goal's weight (0 = inactive).
-    #[serde(default = "one")]
-    pub weight: f64,
-    /// The pulled point in the segment's frame (default: its touch point).
-    #[serde(default)]
-    pub point: Option<[f64; 3]>,
-}
-
-fn one() -> f64 {
-    1.0
-}
-
-/// A segment named or numbered.
-#[derive(Debug, Deserialize)]
-#[serde(untagged)]
-pub enum SegmentRef {
-    /// By index.
-    Index(usize),
-    /// By name.
-    Name(String),
-}
-
-#[derive(Deserialize)]
-#[serde(untagged)]
-enum GoalsFile {
-    List(Vec<GoalEntry>),
-    Object { goals: Vec<GoalEntry> },
 }
 
 /// The body's rest pose in world space, lifted so its lowest joint origin or
@@ -231,41 +196,24 @@ pub fn world_from_file(body: &Body<'_>, file: &PoseFile) -> Result<Vec<(DVec3, D
         .collect()
 }
 
-/// Reads a goals file into marks on a posed body.
+/// Reads a goals file (the format `marionette solve` reads, see
+/// [`crate::cmd::solve`] and `docs/goals.md`) into marks on a posed body.
 pub fn read_goals(
     body: &Body<'_>,
     world: &[(DVec3, DQuat)],
     path: &Path,
 ) -> Result<Vec<Mark>, CmdError> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let file: GoalsFile =
-        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
-    let (entries, list) = match file {
-        GoalsFile::List(g) => (g, ""),
-        GoalsFile::Object { goals: g } => (g, "goals"),
-    };
-    entries
+    let goals = super::solve::read_goals(body, &text, &path.display().to_string())?;
+    goals
         .iter()
-        .enumerate()
-        .map(|(i, g)| {
-            mark(body, world, g).map_err(|e| {
-                let field = format!("{list}[{i}]");
-                let line = crate::locate::line(&text, &field);
-                format!("{}:{line}: {field}: {e}", path.display()).into()
-            })
-        })
+        .map(|g| mark(body, world, g).map_err(|e| format!("{}: {e}", path.display()).into()))
         .collect()
 }
 
 /// One goal as a mark: its target and the point it pulls.
-pub fn mark(body: &Body<'_>, world: &[(DVec3, DQuat)], g: &GoalEntry) -> Result<Mark, String> {
-    let index = match &g.segment {
-        SegmentRef::Index(i) => *i,
-        SegmentRef::Name(n) => body
-            .find(n)
-            .map(usize::from)
-            .ok_or_else(|| format!("goal on unknown segment {n:?}"))?,
-    };
+pub fn mark(body: &Body<'_>, world: &[(DVec3, DQuat)], g: &Goal) -> Result<Mark, String> {
+    let index = usize::from(g.segment);
     let seg = body
         .segment(index)
         .ok_or_else(|| format!("goal on segment {index}, the body has {}", body.len()))?;
@@ -273,18 +221,23 @@ pub fn mark(body: &Body<'_>, world: &[(DVec3, DQuat)], g: &GoalEntry) -> Result<
         .get(index)
         .copied()
         .ok_or_else(|| format!("no placement for segment {index}"))?;
-    let local = g.point.map_or(seg.touch.as_dvec3(), DVec3::from_array);
-    let target = DVec3::from_array(g.target);
-    if !target.is_finite() || !g.weight.is_finite() {
-        return Err(format!("goal on {}: target or weight not finite", seg.name));
-    }
-    let label = if g.weight == 0.0 {
-        format!("{} (inactive)", seg.name)
-    } else {
+    let local = match g.attach {
+        Attach::Point(p) => p.as_dvec3(),
+        Attach::Touch => seg.touch.as_dvec3(),
+    };
+    let Target::Position(target) = g.target else {
+        return Err(format!(
+            "goal on {}: only position goals are drawn",
+            seg.name
+        ));
+    };
+    let label = if g.is_active() {
         format!("{} ×{}", seg.name, g.weight)
+    } else {
+        format!("{} (inactive)", seg.name)
     };
     Ok(Mark {
-        target,
+        target: target.as_dvec3(),
         from: Some(origin + rotation * local),
         label,
     })
@@ -442,12 +395,10 @@ mod tests {
         let world = rest_pose(&body).unwrap();
         let json = r#"{"goals": [
             {"segment": "left_hand", "target": [0.3, 1.2, 0.4], "weight": 10},
-            {"segment": 11, "location": [0, 0, 0], "point": [0, -0.26, 0]},
+            {"segment": "right_hand", "target": [0, 0, 0], "weight": 1, "point": [0, -0.26, 0]},
             {"segment": "head", "target": [0, 2, 0], "weight": 0}
         ]}"#;
-        let GoalsFile::Object { goals } = serde_json::from_str(json).unwrap() else {
-            panic!("object form")
-        };
+        let goals = crate::cmd::solve::read_goals(&body, json, "goals.json").unwrap();
         let marks: Vec<Mark> = goals
             .iter()
             .map(|g| mark(&body, &world, g).unwrap())
@@ -455,19 +406,11 @@ mod tests {
         assert_eq!(marks[0].label, "left_hand ×10");
         assert!(close(marks[0].from.unwrap(), DVec3::new(0.18, 0.79, 0.0)));
         assert!(close(marks[0].target, DVec3::new(0.3, 1.2, 0.4)));
-        // Right hand (11): weight 1 by default; its origin is at
-        // (−0.18, 0.95 + 0.10 + 0.38 − 0.30 − 0.26, 0) = (−0.18, 0.87, 0), and
-        // the given point is 0.26 m below it.
+        // Right hand: its origin is at (−0.18, 0.95 + 0.10 + 0.38 − 0.30 −
+        // 0.26, 0) = (−0.18, 0.87, 0), and the given point is 0.26 m below it.
         assert_eq!(marks[1].label, "right_hand ×1");
         assert!(close(marks[1].from.unwrap(), DVec3::new(-0.18, 0.61, 0.0)));
         assert_eq!(marks[2].label, "head (inactive)");
-
-        let bad: GoalEntry =
-            serde_json::from_str(r#"{"segment": "tail", "target": [0, 0, 0]}"#).unwrap();
-        assert!(mark(&body, &world, &bad).unwrap_err().contains("tail"));
-        let bad: GoalEntry =
-            serde_json::from_str(r#"{"segment": 40, "target": [0, 0, 0]}"#).unwrap();
-        assert!(mark(&body, &world, &bad).unwrap_err().contains("40"));
     }
 
     #[test]
@@ -476,14 +419,14 @@ mod tests {
         let world = rest_pose(&body).unwrap();
         let path =
             std::env::temp_dir().join(format!("marionette-goals-{}.json", std::process::id()));
-        let json = "{\"goals\": [\n  {\"segment\": \"head\", \"target\": [0, 2, 0]},\n  {\"segment\": \"tail\", \"target\": [0, 0, 0]}\n]}";
+        let json = "{\"goals\": [\n  {\"segment\": \"head\", \"target\": [0, 2, 0], \"weight\": 1},\n  {\"segment\": \"tail\", \"target\": [0, 0, 0], \"weight\": 1}\n]}";
         std::fs::write(&path, json).unwrap();
         let err = read_goals(&body, &world, &path).unwrap_err().to_string();
         let _ = std::fs::remove_file(&path);
         let want = format!(
-            "{}:3: goals[1]: goal on unknown segment \"tail\"",
+            "{}:3: goals[1].segment: unknown segment \"tail\"",
             path.display()
         );
-        assert_eq!(err, want);
+        assert!(err.starts_with(&want), "{err}");
     }
 }

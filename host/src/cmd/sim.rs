@@ -16,13 +16,13 @@ use std::path::{Path, PathBuf};
 /// Arguments of `marionette sim`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The rig file.
+    /// The rig file (TOML; docs/rig.md), or the name of one in `rigs/`.
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The table blob (`marionette build`); without it the rig does not arm.
     #[arg(long)]
     pub tables: Option<PathBuf>,
-    /// The tracker recording (CSV).
+    /// The tracker recording (CSV; docs/recording.md).
     #[arg(long)]
     pub recording: PathBuf,
     /// The folder to write `servo_sim.csv` into (created if missing).

@@ -1,7 +1,7 @@
 //! `marionette solve RIG --goals goals.json [--json]`: position a rig to meet
 //! weighted goals with the core solver, from its rest pose or a given pose.
 //!
-//! # Input (the goals file, JSON)
+//! # Input (the goals file, JSON; for users: `docs/goals.md`)
 //!
 //! ```json
 //! {
@@ -100,9 +100,9 @@ pub enum RootArg {
 /// Arguments of `marionette solve`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The rig file (TOML), or the name of one in `rigs/` (e.g. `humanoid16`).
+    /// The rig file (TOML; docs/rig.md), or the name of one in `rigs/` (e.g. `humanoid16`).
     pub rig: PathBuf,
-    /// The goals file (JSON; see `marionette_host::cmd::solve`).
+    /// The goals file (JSON; the format: docs/goals.md).
     #[arg(long)]
     pub goals: PathBuf,
     /// Print the result as JSON (the public contract) instead of a summary.
@@ -280,7 +280,7 @@ pub fn solve_text(
     let body = rig.body();
     let mut angles = doc.start(&rig)?;
     let mut goals = GoalSet::<MAX_GOALS>::new();
-    for (i, g) in doc.goals(&rig)?.into_iter().enumerate() {
+    for (i, g) in doc.goals(&body)?.into_iter().enumerate() {
         goals.push(g).map_err(|_| {
             doc.field(
                 &format!("goals[{i}]"),
@@ -369,6 +369,13 @@ fn reach<const N: usize>(body: &Body<'_>, pose: &Pose<N>, goal: &Goal, touch: Ve
         i = usize::from(parent);
     }
     length
+}
+
+/// The goals of a goals document (`file` names it in errors) on `body`:
+/// the one goals format, which `solve` and `render --goals` both read (see
+/// the module doc and `docs/goals.md`; `start` is checked by `solve` only).
+pub fn read_goals(body: &Body<'_>, text: &str, file: &str) -> Result<Vec<Goal>, GoalsError> {
+    Doc::parse(text, file)?.goals(body)
 }
 
 /// The short human summary: whether the iteration stopped, how many goals
@@ -512,24 +519,24 @@ impl<'t> Doc<'t> {
         Ok(o)
     }
 
-    fn segment(&self, rig: &Rig<'_>, v: Option<&Value>, path: &str) -> Result<u8, GoalsError> {
+    fn segment(&self, body: &Body<'_>, v: Option<&Value>, path: &str) -> Result<u8, GoalsError> {
         let v = v.ok_or_else(|| self.field(path, "missing"))?;
         let name = v
             .as_str()
             .ok_or_else(|| self.field(path, format!("expected a segment name, found {v}")))?;
-        rig.body().find(name).ok_or_else(|| {
-            let names: Vec<&str> = rig.body().segments.iter().map(|s| s.name).collect();
+        body.find(name).ok_or_else(|| {
+            let names: Vec<&str> = body.segments.iter().map(|s| s.name).collect();
             self.field(
                 path,
                 format!(
-                    "unknown segment {name:?} (the rig has: {})",
+                    "unknown segment {name:?} (the segments are: {})",
                     names.join(", ")
                 ),
             )
         })
     }
 
-    fn goals(&self, rig: &Rig<'_>) -> Result<Vec<Goal>, GoalsError> {
+    fn goals(&self, body: &Body<'_>) -> Result<Vec<Goal>, GoalsError> {
         let list = self
             .root
             .get("goals")
@@ -540,7 +547,7 @@ impl<'t> Doc<'t> {
         for (i, g) in list.iter().enumerate() {
             let path = format!("goals[{i}]");
             let o = self.object(g, &path, &["segment", "target", "weight", "point"])?;
-            let segment = self.segment(rig, o.get("segment"), &format!("{path}.segment"))?;
+            let segment = self.segment(body, o.get("segment"), &format!("{path}.segment"))?;
             let target =
                 Vec3::from_array(self.array::<3>(o.get("target"), &format!("{path}.target"))?);
             let weight = self.number(o.get("weight"), &format!("{path}.weight"))?;
@@ -590,7 +597,7 @@ impl<'t> Doc<'t> {
         for (i, s) in list.iter().enumerate() {
             let path = format!("start.segments[{i}]");
             let so = self.object(s, &path, &["name", "position", "rotation"])?;
-            let seg = usize::from(self.segment(rig, so.get("name"), &format!("{path}.name"))?);
+            let seg = usize::from(self.segment(&body, so.get("name"), &format!("{path}.name"))?);
             let p =
                 Vec3::from_array(self.array::<3>(so.get("position"), &format!("{path}.position"))?);
             let [w, x, y, z] = self.array::<4>(so.get("rotation"), &format!("{path}.rotation"))?;

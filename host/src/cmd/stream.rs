@@ -47,10 +47,10 @@ pub struct Args {
     /// 921 600); the sender never writes faster than it.
     #[arg(long, default_value_t = 921_600)]
     pub baud: u32,
-    /// The tracker recording (CSV).
+    /// The tracker recording (CSV; docs/recording.md).
     #[arg(long)]
     pub recording: PathBuf,
-    /// The rig file (for its frame period; the rig itself is in the board's flash).
+    /// The rig file (docs/rig.md; for its frame period, the rig itself is in the board's flash).
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// Send every frame as soon as the link takes it (nothing dropped, not
