@@ -277,3 +277,27 @@ fn every_frame_keeps_the_solvers_budget_on_the_emulated_board() {
         );
     }
 }
+
+#[test]
+fn the_warm_solve_at_1_khz_meets_every_goal_on_the_emulated_board() {
+    // The bench prints `met <row> <goals within the tolerance> <goals>`
+    // after the row `solve.cmu4.warm1k.treedls`.
+    let console = icount::run_bench().unwrap();
+    let met: Vec<&str> = console
+        .lines()
+        .find(|l| l.starts_with("met solve.cmu4.warm1k.treedls "))
+        .unwrap_or_else(|| panic!("no met line: {console}"))
+        .split_whitespace()
+        .skip(2)
+        .collect();
+    assert_eq!(met, ["4", "4"]);
+    let rows = icount::parse(&console).unwrap();
+    let row = rows
+        .iter()
+        .find(|r| r.name == "solve.cmu4.warm1k.treedls")
+        .unwrap();
+    println!(
+        "solve.cmu4.warm1k.treedls: {:.0} instructions",
+        row.instructions
+    );
+}
