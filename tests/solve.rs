@@ -1317,8 +1317,14 @@ fn carried_state_matches_fresh_solves() {
             }
             _ => {}
         }
-        let a = solve(&s, body, &g, &mut fresh, &mut fresh_pose);
-        let b = solve_with(&s, body, &g, &mut carried, &mut carried_pose, &mut state);
+        let mut a = solve(&s, body, &g, &mut fresh, &mut fresh_pose);
+        let mut b = solve_with(&s, body, &g, &mut carried, &mut carried_pose, &mut state);
+        // The counted work differs by what the state saved (the joint
+        // layout); all else is the same to the bit.
+        if let (Ok(a), Ok(b)) = (&mut a, &mut b) {
+            assert!(b.work <= a.work, "frame {frame}: {} > {}", b.work, a.work);
+            b.work = a.work;
+        }
         assert_eq!(a, b, "frame {frame}");
         assert_eq!(fresh, carried, "frame {frame}");
         assert_eq!(fresh_pose, carried_pose, "frame {frame}");

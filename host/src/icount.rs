@@ -8,6 +8,7 @@
 
 use crate::qemu::{self, Config, QemuError};
 use crate::{perform, rigfile};
+use marionette_core::deadline::Budget;
 use marionette_core::frame::Region;
 use marionette_core::perform::Performer;
 use marionette_core::solve::SolverState;
@@ -187,6 +188,126 @@ pub fn perform_stack(frames: usize) -> Result<Option<u32>, IcountError> {
         Duration::ZERO,
     )?;
     Ok(run.board_stack)
+}
+
+/// Where the `replay` firmware reads the session in the table region
+/// (`firmware/src/bin/replay.rs`).
+pub const REPLAY_SESSION_OFFSET: usize = 0x8_0000;
+
+/// The instructions of one tracker frame of a replayed session, by stage.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct FrameCost {
+    /// The frame's sequence number.
+    pub seq: u32,
+    /// Receiving and decoding.
+    pub decode: f64,
+    /// The sensor map.
+    pub map: f64,
+    /// Synthesis.
+    pub synth: f64,
+    /// Solving.
+    pub solve: f64,
+    /// The servo map.
+    pub servo: f64,
+    /// The whole frame in the core's stage counts.
+    pub total: f64,
+    /// The whole call of the performer that handled the frame.
+    pub receive: f64,
+}
+
+/// Runs a session through the live loop on the emulated board
+/// (`firmware/src/bin/replay.rs`), with the solver's budget per frame
+/// (`None`: the loop's own), and returns the instructions of every tracker
+/// frame that drove the servos, in order.
+pub fn replay(
+    region: &[u8],
+    session: &[perform::Sent],
+    budget: Option<Budget>,
+) -> Result<Vec<FrameCost>, IcountError> {
+    if region.len() > REPLAY_SESSION_OFFSET {
+        return Err(IcountError::Region(format!(
+            "the region is {} bytes; the replay firmware reads at most {REPLAY_SESSION_OFFSET}",
+            region.len()
+        )));
+    }
+    let mut image = region.to_vec();
+    image.resize(REPLAY_SESSION_OFFSET, 0);
+    image.extend_from_slice(b"RPLY");
+    // The loop's own budget: both words u32::MAX.
+    let budget = budget.unwrap_or(Budget::uniform(u32::MAX));
+    image.extend_from_slice(&budget.plain.to_le_bytes());
+    image.extend_from_slice(&budget.adjusted.to_le_bytes());
+    image.extend_from_slice(
+        &u32::try_from(session.len())
+            .unwrap_or(u32::MAX)
+            .to_le_bytes(),
+    );
+    for m in session {
+        let len = u16::try_from(m.bytes.len())
+            .map_err(|_| IcountError::Region("a message longer than 65535 bytes".into()))?;
+        image.extend_from_slice(&m.time_us.to_le_bytes());
+        image.extend_from_slice(&len.to_le_bytes());
+        image.extend_from_slice(&m.bytes);
+    }
+    if image.len() > qemu::TABLE_REGION_LEN {
+        return Err(IcountError::Region(format!(
+            "the session does not fit the emulated table region ({} bytes)",
+            image.len()
+        )));
+    }
+    let elf = qemu::build_firmware("replay")?;
+    let mut file = tempfile::NamedTempFile::new().map_err(QemuError::Io)?;
+    std::io::Write::write_all(&mut file, &image).map_err(QemuError::Io)?;
+    let config = Config {
+        icount: true,
+        serial: false,
+        tables: Some(file.path().to_path_buf()),
+        timeout: Duration::from_secs(600),
+        ..Config::new(elf)
+    };
+    let out = qemu::run(&config, &[])?;
+    if out.status != Some(0) {
+        return Err(IcountError::Status(out.status));
+    }
+    parse_frames(&out.console)
+}
+
+/// Parses the `frame` lines of the replay firmware.
+pub fn parse_frames(console: &str) -> Result<Vec<FrameCost>, IcountError> {
+    let mut frames = Vec::new();
+    for (i, text) in console.lines().enumerate() {
+        let mut words = text.split_whitespace();
+        if words.next() != Some("frame") {
+            continue;
+        }
+        let v: Vec<u32> = words
+            .map(str::parse)
+            .collect::<Result<_, _>>()
+            .map_err(|_| IcountError::Parse {
+                line: i + 1,
+                why: "not a number",
+                text: text.to_string(),
+            })?;
+        let [seq, decode, map, synth, solve, servo, total, receive] = v[..] else {
+            return Err(IcountError::Parse {
+                line: i + 1,
+                why: "not eight numbers",
+                text: text.to_string(),
+            });
+        };
+        let i = |t: u32| f64::from(t) / TICKS_PER_INSTRUCTION;
+        frames.push(FrameCost {
+            seq,
+            decode: i(decode),
+            map: i(map),
+            synth: i(synth),
+            solve: i(solve),
+            servo: i(servo),
+            total: i(total),
+            receive: i(receive),
+        });
+    }
+    Ok(frames)
 }
 
 /// Builds and runs the bench firmware under `-icount` and returns its rows.

@@ -29,7 +29,9 @@
 //!   synthesis moved; then the goals are solved ([`Solver::DEFAULT`]). The
 //!   solver keeps its [`SolverState`] from frame to frame (the reach tree
 //!   and joint layout are rebuilt only when the active goals change) and
-//!   never leaves a joint limit.
+//!   never leaves a joint limit. It works within a budget per frame
+//!   ([`crate::deadline`]): what it cannot finish in one frame, the
+//!   correction carries into the next.
 //! - **servo**: each servo follows one joint angle through its calibration
 //!   and a [`Slew`] limiter, so no pulse leaves its calibrated range or moves
 //!   faster than the servo's speed and acceleration limits.
@@ -89,6 +91,7 @@
 //! [`RigTooLarge`](crate::wire::StatusReason::RigTooLarge), like a missing rig: nothing is driven.
 
 use crate::body::{Angles, Body};
+use crate::deadline::{self, Budget};
 use crate::goal::GoalSet;
 use crate::grid::{Adjust, Grid, Query};
 pub use crate::perform::{Cause, Performer, Update};
@@ -265,6 +268,30 @@ struct Jog {
     ending: bool,
 }
 
+/// What one frame's solve did ([`Pipeline::last_solve`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SolveStats {
+    /// Its iterations.
+    pub iterations: u32,
+    /// Its work by the solver's cost model ([`solve::Report::work`]).
+    pub work: u32,
+    /// The budget it had ([`deadline`]).
+    pub budget: u32,
+    /// Whether it stopped on its own (goals met), not on the budget or
+    /// the iteration cap.
+    pub converged: bool,
+}
+
+impl SolveStats {
+    /// No solve yet.
+    const NONE: Self = Self {
+        iterations: 0,
+        work: 0,
+        budget: 0,
+        converged: true,
+    };
+}
+
 /// The per-frame pipeline of one rig, for at most `N` segments (see the
 /// module doc): map, synthesize, solve, servo.
 pub struct Pipeline<'r, 'a, const N: usize = MAX_SEGMENTS> {
@@ -293,6 +320,12 @@ pub struct Pipeline<'r, 'a, const N: usize = MAX_SEGMENTS> {
     /// What the solver built for the last frame's goals (reach tree, joint
     /// layout, rotations), reused while the active goals stay the same.
     solver: &'r mut SolverState<N>,
+    /// The solver's work per frame ([`deadline`]).
+    budget: Budget,
+    /// The last frame's synthesis adjusted the parameters.
+    adjusted_now: bool,
+    /// The last frame's solve.
+    last_solve: SolveStats,
     slews: [Option<Slew>; MAX_SERVOS],
     /// The step length the slews' limits are set for, seconds.
     step_dt: Option<f32>,
@@ -356,6 +389,9 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             pose: *rig.rest_pose(),
             local: LocalPose::default(),
             solver,
+            budget: Budget::for_rig(rig.frame_period_us(), deadline::CLOCK_HZ, rig.body().len()),
+            adjusted_now: false,
+            last_solve: SolveStats::NONE,
             slews,
             step_dt: None,
             targets,
@@ -370,6 +406,26 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
     #[must_use]
     pub fn rig(&self) -> &'r Rig<'a, N> {
         self.rig
+    }
+
+    /// The solver's work per frame, in the units of
+    /// [`Report::work`](solve::Report::work): the rig's frame period on the
+    /// board, less the rest of the frame ([`Budget::for_rig`]).
+    #[must_use]
+    pub fn solve_budget(&self) -> Budget {
+        self.budget
+    }
+
+    /// Sets the solver's work per frame (for example to study the loop at
+    /// another budget; the board keeps the one [`Pipeline::new`] sets).
+    pub fn set_solve_budget(&mut self, budget: Budget) {
+        self.budget = budget;
+    }
+
+    /// The last frame's solve: its iterations, its work and its budget.
+    #[must_use]
+    pub fn last_solve(&self) -> SolveStats {
+        self.last_solve
     }
 
     /// Whether the table is a grid this pipeline can synthesize from.
@@ -643,7 +699,8 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         if grid.query_into(params, &mut query).is_err() {
             return false;
         }
-        if query.adjust() != Adjust::None {
+        self.adjusted_now = query.adjust() != Adjust::None;
+        if self.adjusted_now {
             self.adjusted = self.adjusted.saturating_add(1);
         }
         if query.pose(table, &mut self.synth).is_err() {
@@ -661,8 +718,9 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
     fn solve(&mut self) -> bool {
         let body: Body<'_> = self.rig.body();
         self.warm.start(&body, &self.goals, &mut self.angles);
+        let budget = self.budget.get(self.adjusted_now);
         match solve::solve_with(
-            &SOLVER,
+            &SOLVER.with_budget(budget),
             &body,
             &self.goals,
             &mut self.angles,
@@ -673,6 +731,12 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
                 for (r, x) in self.residuals.iter_mut().zip(report.residuals.iter()) {
                     *r = *x;
                 }
+                self.last_solve = SolveStats {
+                    iterations: report.iterations,
+                    work: report.work,
+                    budget,
+                    converged: report.converged,
+                };
                 self.warm.finish(&self.angles);
                 true
             }

@@ -53,6 +53,7 @@
 pub mod body;
 pub mod clip;
 pub mod crc;
+pub mod deadline;
 pub mod frame;
 pub mod goal;
 pub mod grid;

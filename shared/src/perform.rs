@@ -322,6 +322,13 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         self.pipeline.as_ref()
     }
 
+    /// The per-frame pipeline, mutable (for example to study the loop at
+    /// another solver budget, [`Pipeline::set_solve_budget`]).
+    #[must_use]
+    pub fn pipeline_mut(&mut self) -> Option<&mut Pipeline<'r, 'a, N>> {
+        self.pipeline.as_mut()
+    }
+
     /// The rig's frame period (1000 µs without a rig): call
     /// [`Performer::tick`] this often.
     #[must_use]

@@ -53,6 +53,8 @@ pub(super) struct Group {
     pub live: bool,
     /// Its values changed since the last forward kinematics.
     moved: bool,
+    /// The goals it moves (the bits of `dep_a | dep_b`).
+    moves: u8,
 }
 
 /// A joint's rotation relative to its parent, kept with the angles it was
@@ -145,6 +147,7 @@ const NO_GROUP: Group = Group {
     turn: (0.0, 0.0),
     live: false,
     moved: false,
+    moves: 0,
 };
 const NO_DOFS: Dofs = Dofs {
     curvature: Vec3::ZERO,
@@ -181,6 +184,28 @@ impl Group {
     }
 }
 
+/// The sizes the work of a layout depends on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Sizes {
+    /// Steps of the goals' climbs.
+    pub climbs: usize,
+    /// DOFs of the groups.
+    pub dofs: usize,
+    /// DOFs of the segments off the path.
+    pub rest_dofs: usize,
+}
+
+/// The sizes the work of an iteration depends on: the live groups, their
+/// DOFs, their links, the DOFs of their links and `Σ links²`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Live {
+    pub groups: usize,
+    pub dofs: usize,
+    pub links: usize,
+    pub link_dofs: usize,
+    pub pairs: usize,
+}
+
 /// The moving joints, their state and their columns.
 pub(super) struct Joints<const N: usize> {
     pub groups: [Group; N],
@@ -204,6 +229,12 @@ pub(super) struct Joints<const N: usize> {
     pub reach: u16,
     /// The root position changed since the last forward kinematics.
     root_moved: bool,
+    /// The work sizes of the layout: the steps of the goals' climbs in
+    /// [`Joints::init`], the DOFs of the groups and of the segments off the
+    /// path.
+    pub sizes: Sizes,
+    /// The work sizes of the live groups ([`Joints::settle`]).
+    pub live: Live,
     /// The pose in the work is that of the angles, except for the groups
     /// marked `moved` and the root if `root_moved` (false: the next forward
     /// kinematics places the whole path).
@@ -230,6 +261,18 @@ impl<const N: usize> Joints<N> {
         unmet: 0,
         reach: 0,
         root_moved: false,
+        sizes: Sizes {
+            climbs: 0,
+            dofs: 0,
+            rest_dofs: 0,
+        },
+        live: Live {
+            groups: 0,
+            dofs: 0,
+            links: 0,
+            link_dofs: 0,
+            pairs: 0,
+        },
         placed: false,
         local: [Local::NONE; N],
         generation: 0,
@@ -254,23 +297,30 @@ impl<const N: usize> Joints<N> {
         // the slots with a point and with a frame.
         let mut moves = [(0u16, 0u16); N];
         let (mut dep_a, mut dep_b) = (0u16, 0u16);
+        self.sizes = Sizes {
+            climbs: 0,
+            dofs: 0,
+            rest_dofs: 0,
+        };
         for (j, slot) in slots.iter().enumerate() {
             let Some(g) = work.goals.get(usize::from(slot.goal)) else {
                 continue;
             };
-            climb(body, usize::from(g.segment), (1 << j, 0), &mut moves);
+            self.sizes.climbs += climb(body, usize::from(g.segment), (1 << j, 0), &mut moves);
             dep_a |= 1 << j;
             if let Frame::Segment(f) = g.frame {
-                climb(body, usize::from(f), (0, 1 << j), &mut moves);
+                self.sizes.climbs += climb(body, usize::from(f), (0, 1 << j), &mut moves);
                 dep_b |= 1 << j;
             }
         }
         if solver.root == RootMode::Float {
+            self.sizes.dofs += 3;
             self.push(Group {
                 seg: TRANSLATION,
                 count: 3,
                 dep_a,
                 dep_b,
+                moves: (dep_a | dep_b).count_ones() as u8,
                 min: Vec3::NEG_INFINITY,
                 max: Vec3::INFINITY,
                 ..NO_GROUP
@@ -286,8 +336,12 @@ impl<const N: usize> Joints<N> {
                 RootMode::Float => deps == (dep_a, dep_b),
                 RootMode::Fixed => s == 0,
             };
+            if !on_path {
+                self.sizes.rest_dofs += seg.joint.count();
+            }
             if on_path {
                 let group = if !above && seg.joint.count() > 0 {
+                    self.sizes.dofs += seg.joint.count();
                     self.push(joint_group(s, seg, deps))
                 } else {
                     FIXED
@@ -311,6 +365,11 @@ impl<const N: usize> Joints<N> {
         *slot = g;
         self.count += 1;
         u8::try_from(self.count - 1).unwrap_or(FIXED)
+    }
+
+    /// The segments the forward kinematics visits (the path).
+    pub fn path_len(&self) -> usize {
+        self.nodes
     }
 
     /// The groups in use.
@@ -408,21 +467,24 @@ impl<const N: usize> Joints<N> {
 }
 
 /// Adds the slot bits `(point, frame)` to the entries of `moves` of segment
-/// `s` and of its ancestors.
+/// `s` and of its ancestors; returns the segments visited.
 fn climb<const N: usize>(
     body: &Body<'_>,
     s: usize,
     (point, frame): (u16, u16),
     moves: &mut [(u16, u16); N],
-) {
+) -> usize {
     let mut at = Some(s);
+    let mut steps = 0;
     while let Some(s) = at {
         if let Some(d) = moves.get_mut(s) {
             (d.0, d.1) = (d.0 | point, d.1 | frame);
         }
+        steps += 1;
         // Parents come before children (checked): the climb ends.
         at = body.parent(s).filter(|&p| p < s);
     }
+    steps
 }
 
 /// The group of segment `s`'s joint (unused DOFs: about X, limits 0).
@@ -444,6 +506,7 @@ fn joint_group(s: usize, seg: &Segment<'_>, (dep_a, dep_b): (u16, u16)) -> Group
         turn: (0.0, 0.0),
         live: false,
         moved: false,
+        moves: (dep_a | dep_b).count_ones() as u8,
     }
 }
 
@@ -664,14 +727,27 @@ impl<const N: usize> Joints<N> {
             }
         });
         let mut reach = 0u16;
+        let mut live = Live {
+            groups: 0,
+            dofs: 0,
+            links: 0,
+            link_dofs: 0,
+            pairs: 0,
+        };
         for g in self.groups.iter_mut().take(self.count) {
             let moves = g.dep_a | g.dep_b;
             g.live = moves & unmet != 0;
             if g.live {
                 reach |= moves;
+                let (links, dofs) = (usize::from(g.moves), usize::from(g.count));
+                live.groups += 1;
+                live.dofs += dofs;
+                live.links += links;
+                live.link_dofs += links * dofs;
+                live.pairs += links * links;
             }
         }
-        (self.unmet, self.reach) = (unmet, reach);
+        (self.unmet, self.reach, self.live) = (unmet, reach, live);
     }
 
     /// The groups in use, their DOFs' state and the link store, borrowed

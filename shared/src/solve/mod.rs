@@ -96,6 +96,7 @@
 
 mod balance;
 mod ccd;
+pub mod cost;
 mod dls;
 mod greedy;
 mod joints;
@@ -165,6 +166,11 @@ pub struct Solver {
     /// so this finds better minima far from the start; a live loop wants the
     /// minimum near its synthesized start instead, and 0.
     pub restarts: u8,
+    /// [`Method::TreeDls`]: the most work a solve may do, in the units of
+    /// [`Report::work`]; it starts no iteration (or restart) that might take
+    /// it past this, and what is left is for the next solve. `u32::MAX`: no
+    /// limit.
+    pub budget: u32,
 }
 
 impl Solver {
@@ -178,6 +184,7 @@ impl Solver {
         damping: 0.1,
         extrapolate: true,
         restarts: 0,
+        budget: u32::MAX,
     };
 
     /// The default: whole-tree damped least squares, root fixed, goals met to
@@ -192,6 +199,7 @@ impl Solver {
         damping: 0.1,
         extrapolate: false,
         restarts: 0,
+        budget: u32::MAX,
     };
 
     /// The same configuration with another method.
@@ -219,6 +227,13 @@ impl Solver {
     #[must_use]
     pub const fn with_restarts(mut self, restarts: u8) -> Self {
         self.restarts = restarts;
+        self
+    }
+
+    /// The same configuration with another work budget.
+    #[must_use]
+    pub const fn with_budget(mut self, budget: u32) -> Self {
+        self.budget = budget;
         self
     }
 }
@@ -262,6 +277,13 @@ pub struct Report<const G: usize> {
     pub residuals: [f32; G],
     /// The weighted error `Σ weight · residual²` over the active goals.
     pub error: f32,
+    /// [`Method::TreeDls`]: the work the solve did, by the solver's cost
+    /// model ([`cost`]: a bound on its instructions on the firmware's
+    /// Cortex-M4F); 0 for the other methods.
+    pub work: u32,
+    /// The units of [`Report::work`] per [`cost::Term`] (to fit the model).
+    #[cfg(feature = "cost-terms")]
+    pub terms: [u32; cost::TERMS],
 }
 
 /// Largest accepted magnitude of any coordinate of an active goal's target
@@ -397,6 +419,10 @@ fn solve_in<const N: usize, const G: usize>(
     state_layout: &mut Option<Layout>,
 ) -> Result<Report<G>, SolveError> {
     let mut work = Work::new(body, goals.as_slice(), angles, pose);
+    let mut meter = cost::Meter::new(solver.budget);
+    meter.add(cost::Term::Solve, 1);
+    meter.add(cost::Term::Segment, body.len());
+    meter.add(cost::Term::Goal, goals.as_slice().len());
     work.check()?;
     let layout = Layout::of(solver, body, goals.as_slice());
     let laid_out = layout.is_some() && *state_layout == layout;
@@ -405,7 +431,7 @@ fn solve_in<const N: usize, const G: usize>(
     let (iterations, converged, lm) = match kept {
         // Finds the reach tree's joints from the goals, without the tree.
         Kept::Lm(lm) => {
-            let (iterations, converged) = tree::solve(solver, lm, laid_out, &mut work)?;
+            let (iterations, converged) = tree::solve(solver, lm, laid_out, &mut work, &mut meter)?;
             (iterations, converged, Some(lm))
         }
         Kept::Tree(tree) => {
@@ -428,7 +454,13 @@ fn solve_in<const N: usize, const G: usize>(
         converged,
         residuals: [0.0; G],
         error: 0.0,
+        work: 0,
+        #[cfg(feature = "cost-terms")]
+        terms: meter.spent().units,
     };
+    if lm.is_some() {
+        report.work = meter.spent().cost();
+    }
     // With an active goal, tree DLS leaves every active goal's residual at
     // the final pose in its slots (in goal order): the same numbers as
     // evaluating the goal again.

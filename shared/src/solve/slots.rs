@@ -77,6 +77,8 @@ pub(super) struct Slots {
     pub worst: f32,
     /// `Σ w / w_max`.
     pub weight: f32,
+    /// Point goals in the world frame (the cheapest to evaluate).
+    pub simple: usize,
 }
 
 impl Slots {
@@ -87,13 +89,17 @@ impl Slots {
         error: 0.0,
         worst: 0.0,
         weight: 0.0,
+        simple: 0,
     };
 
     /// Takes the active goals of the set (scaled by the heaviest weight
     /// `wmax`), not yet evaluated, in place of any it held.
     pub fn init(&mut self, goals: &[Goal], wmax: f32) -> Result<(), SolveError> {
-        (self.count, self.weight) = (0, 0.0);
+        (self.count, self.weight, self.simple) = (0, 0.0, 0);
         for (i, g) in goals.iter().enumerate().filter(|(_, g)| g.is_active()) {
+            if let (Target::Position(_), Frame::World) = (g.target, g.frame) {
+                self.simple += 1;
+            }
             let (kind, one_sided) = match g.target {
                 Target::Position(_) => (Kind::Point, false),
                 Target::Plane { side, .. } => (Kind::Plane, side == PlaneSide::Above),

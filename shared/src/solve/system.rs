@@ -29,7 +29,7 @@ use crate::math;
 use glam::{Mat3, Vec3};
 
 /// Rounds of clamping variables that a step would push through a limit.
-const CLAMP_PASSES: usize = 3;
+pub(super) const CLAMP_PASSES: usize = 3;
 /// The damping floor's lever, m: below it a DOF is damped as if its goals
 /// were this far from its axis.
 const LEVER: f32 = 0.1;
@@ -54,6 +54,13 @@ pub(super) struct System {
     coupled_for: Option<(u16, u16)>,
     /// Bit `j`: slot `j` takes part.
     awake: u16,
+    /// The work of the last [`System::step`]: its rounds, its
+    /// factorisation passes, and whether it found the coupling again.
+    pub work: (usize, usize, bool),
+    /// The most work of a factorisation for this layout: its off-diagonal
+    /// blocks and its block products when every goal is awake and every
+    /// group live ([`System::forget`]).
+    pub most: (usize, usize),
 }
 
 /// Per block row, the blocks that may be nonzero.
@@ -74,17 +81,49 @@ impl System {
         coupled: [0; MAX_GOALS],
         coupled_for: None,
         awake: 0,
+        work: (0, 0, false),
+        most: (0, 0),
     };
 
-    /// Forgets the coupling: the joint layout changed.
-    pub fn forget(&mut self) {
+    /// Forgets the coupling: the joint layout changed. Finds the most work
+    /// of a factorisation for the new layout (`n` goals): the coupling of
+    /// all goals through all groups bounds that of any goals awake through
+    /// any groups live.
+    pub fn forget<const N: usize>(&mut self, joints: &Joints<N>, n: usize) {
         self.coupled_for = None;
+        let mut all: Coupling = [0; MAX_GOALS];
+        for g in joints.groups() {
+            let moves = g.dep_a | g.dep_b;
+            let mut bits = moves;
+            while bits != 0 {
+                let t = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                if let Some(c) = all.get_mut(t) {
+                    *c |= moves & ((2u16 << t) - 1);
+                }
+            }
+        }
+        fill_in(&mut all, n);
+        let (mut blocks, mut products) = (0, 0);
+        for (s, &cs) in all.iter().enumerate().take(n) {
+            let mut below = cs & ((1u16 << s) - 1);
+            blocks += below.count_ones() as usize;
+            while below != 0 {
+                let k = below.trailing_zeros() as usize;
+                below &= below - 1;
+                let ck = all.get(k).copied().unwrap_or(0);
+                products += (cs & ck & ((1u16 << k) - 1)).count_ones() as usize;
+            }
+        }
+        self.most = (blocks, products);
     }
 
     /// Computes the step (each group's `delta`) at damping `λ²` for the
     /// linearisation in `joints` and the residuals in `slots` (scaled into
     /// `r`, scratch kept by the caller, left less the motion of the DOFs held
-    /// at a limit); false if the system is singular.
+    /// at a limit), in at most `plan = (rounds, passes per round)` (a woken
+    /// plane takes a second round; a clamped limit another pass); false if
+    /// the system is singular.
     pub fn step<const N: usize>(
         &mut self,
         work: &Work<'_, '_, N>,
@@ -92,15 +131,18 @@ impl System {
         slots: &Slots,
         r: &mut Rhs,
         lambda2: f32,
+        (rounds, passes): (usize, usize),
     ) -> bool {
         slots.rhs(r);
         self.awake = slots.awake() & joints.reach;
-        for round in 0..2 {
+        self.work = (0, 0, false);
+        for round in 0..rounds.min(2) {
+            self.work.0 += 1;
             if round > 0 {
                 joints.sums(slots, self.awake, r);
             }
             self.assemble(joints, slots.count, lambda2);
-            if !self.solve(joints, slots.count, r) {
+            if !self.solve(joints, slots.count, r, passes) {
                 return false;
             }
             let awake = self.awake;
@@ -118,18 +160,26 @@ impl System {
         true
     }
 
-    /// Solves for the step, clamping at the limits (a few rounds; the motion
-    /// of the DOFs held at a limit is taken out of `r`); false if the matrix
-    /// is singular.
-    fn solve<const N: usize>(&mut self, joints: &mut Joints<N>, n: usize, r: &mut Rhs) -> bool {
+    /// Solves for the step, clamping at the limits (at most `passes`, and
+    /// [`CLAMP_PASSES`]; the motion of the DOFs held at a limit is taken out
+    /// of `r`); false if the matrix is singular.
+    fn solve<const N: usize>(
+        &mut self,
+        joints: &mut Joints<N>,
+        n: usize,
+        r: &mut Rhs,
+        passes: usize,
+    ) -> bool {
         let n = n.min(MAX_GOALS);
-        for pass in 0..CLAMP_PASSES {
+        let passes = passes.clamp(1, CLAMP_PASSES);
+        for pass in 0..passes {
+            self.work.1 += 1;
             if !factor(&self.a, &mut self.l, &self.coupled, n, r, &mut self.y)
                 || !substitute(&self.l, &self.coupled, n, &mut self.y)
             {
                 return false;
             }
-            let last = pass + 1 == CLAMP_PASSES;
+            let last = pass + 1 == passes;
             if !spread(joints, &mut self.a, self.awake, &self.y, r, last) {
                 break;
             }
@@ -176,6 +226,7 @@ impl System {
         if !known {
             fill_in(&mut self.coupled, n);
             self.coupled_for = Some(key);
+            self.work.2 = true;
         }
     }
 

@@ -36,8 +36,9 @@
 //! solve is repeated from the rest pose and from poses spread over the moving
 //! joints' ranges, and the lowest error wins.
 
+use super::cost::{Meter, Tally, Term};
 use super::joints::Joints;
-use super::slots::{Rhs, Slots};
+use super::slots::{Kind, Rhs, Slots};
 use super::system::System;
 use super::{SolveError, Solver, Work};
 use crate::math;
@@ -51,6 +52,8 @@ const MIN_DAMPING: f32 = 1e-2;
 const MAX_DAMPING: f32 = 100.0;
 /// The largest turn (rad) or translation (m) of one step.
 const MAX_STEP: f32 = 1.0;
+/// Factorisation passes per round of a step (`system::CLAMP_PASSES`).
+const CLAMP_PASSES: usize = super::system::CLAMP_PASSES;
 
 /// The state of a whole-tree solve, built in place and kept between solves
 /// (inside a [`super::SolverState`]).
@@ -60,6 +63,44 @@ pub(super) struct Lm<const N: usize> {
     system: System,
     /// Scratch of [`System::step`]: the scaled residuals.
     rhs: Rhs,
+    /// The prices of an iteration's parts for the live groups.
+    prices: Prices,
+}
+
+/// The work of the parts of an iteration, by the cost model, for the live
+/// groups of a linearisation.
+#[derive(Clone, Copy, Debug)]
+struct Prices {
+    /// Every iteration.
+    base: Tally,
+    /// A new linearisation.
+    linearise: Tally,
+    /// A trial step: applying it, forward kinematics and the goals.
+    trial: Tally,
+    /// Going back from a rejected trial.
+    reject: Tally,
+    /// A round of a step (assembling the system).
+    round: Tally,
+    /// A factorisation pass (with the clamping at the limits).
+    pass: Tally,
+    /// Finding the goals' coupling again.
+    couple: Tally,
+    /// A one-sided plane may wake (a step may take two rounds).
+    planes: bool,
+}
+
+impl Prices {
+    /// Nothing priced yet.
+    const NONE: Prices = Prices {
+        base: Tally::NONE,
+        linearise: Tally::NONE,
+        trial: Tally::NONE,
+        reject: Tally::NONE,
+        round: Tally::NONE,
+        pass: Tally::NONE,
+        couple: Tally::NONE,
+        planes: false,
+    };
 }
 
 impl<const N: usize> Lm<N> {
@@ -69,6 +110,7 @@ impl<const N: usize> Lm<N> {
         slots: Slots::EMPTY,
         system: System::EMPTY,
         rhs: [glam::Vec3::ZERO; MAX_GOALS],
+        prices: Prices::NONE,
     };
 
     /// The active goals as [`solve`] left them: at its final pose, if it
@@ -82,30 +124,44 @@ impl<const N: usize> Lm<N> {
 /// Leaves the full world pose of the result in `work`. With `laid_out`, the
 /// joints in `lm` are already those of these goals (the same active goals on
 /// the same segments, the same body and root mode) and are not built again.
+/// Counts its work in `meter` and starts no iteration that might take it
+/// past its limit.
 pub(super) fn solve<const N: usize>(
     solver: &Solver,
     lm: &mut Lm<N>,
     laid_out: bool,
     work: &mut Work<'_, '_, N>,
+    meter: &mut Meter,
 ) -> Result<(u32, bool), SolveError> {
     let wmax = work
         .goals
         .iter()
         .filter(|g| g.is_active())
         .fold(0.0f32, |m, g| math::max(g.weight, m));
+    let segments = work.body.len();
     if wmax <= 0.0 {
+        meter.add(Term::Place, segments);
+        meter.add(Term::Turn, 3 * segments);
         work.forward()?;
         return Ok((0, true));
     }
     lm.slots.init(work.goals, wmax)?;
+    meter.add(Term::Slot, lm.slots.count);
     if !laid_out {
         lm.joints.init(solver, work, &lm.slots);
-        lm.system.forget();
+        lm.system.forget(&lm.joints, lm.slots.count);
+        meter.add(Term::Layout, 1);
+        meter.add(Term::LayoutSegment, segments);
+        meter.add(Term::Climb, lm.joints.sizes.climbs);
     }
-    let (mut iterations, mut converged) = lm.run(solver, work)?;
+    // The final pose of the segments off the path, counted first: it is
+    // always made.
+    meter.add(Term::Rest, segments.saturating_sub(lm.joints.path_len()));
+    meter.add(Term::RestDof, lm.joints.sizes.rest_dofs);
+    let (mut iterations, mut converged) = lm.run(solver, work, meter)?;
     let tol2 = solver.tolerance * solver.tolerance;
     if solver.restarts > 0 && lm.slots.worst > tol2 {
-        let (it, conv) = lm.restart(solver, work)?;
+        let (it, conv) = lm.restart(solver, work, meter)?;
         iterations += it;
         converged &= conv;
     }
@@ -120,14 +176,112 @@ impl<const N: usize> Lm<N> {
         self.slots.evaluate(work)
     }
 
+    /// The work of a forward kinematics that may turn joints of `dofs`
+    /// DOFs, and of evaluating the goals.
+    fn refresh_work(&self, dofs: usize) -> Tally {
+        let simple = self.slots.simple;
+        Tally::NONE
+            .with(Term::Place, self.joints.path_len())
+            .with(Term::Turn, dofs)
+            .with(Term::EvalPoint, simple)
+            .with(Term::EvalOther, self.slots.count.saturating_sub(simple))
+    }
+
+    /// Prices the parts of an iteration with the live groups of the last
+    /// [`Joints::settle`].
+    fn price(&mut self) {
+        let live = self.joints.live;
+        let (groups, g) = (self.joints.count, self.slots.count);
+        let refresh = self.refresh_work(live.dofs);
+        let (blocks, products) = self.system.most;
+        self.prices = Prices {
+            base: Tally::NONE
+                .with(Term::Iteration, 1)
+                .with(Term::IterationSlot, g)
+                .with(Term::Group, groups),
+            linearise: Tally::NONE
+                .with(Term::LiveDof, live.dofs)
+                .with(Term::LinkDof, live.link_dofs),
+            trial: refresh.with(Term::Apply, groups),
+            reject: refresh.with(Term::Reject, groups),
+            round: Tally::NONE
+                .with(Term::Pair, live.pairs)
+                .with(Term::Block, g * g),
+            pass: Tally::NONE
+                .with(Term::Pass, 1)
+                .with(Term::PassSlot, g)
+                .with(Term::PassBlock, blocks)
+                .with(Term::PassProduct, products)
+                .with(Term::PassLink, live.dofs + live.link_dofs),
+            couple: Tally::NONE.with(Term::Couple, live.link_dofs + g * g),
+            planes: self
+                .slots
+                .iter()
+                .any(|s| s.kind == Kind::Plane && s.one_sided),
+        };
+    }
+
+    /// The most a next iteration can do within `left`: its rounds (2 when a
+    /// one-sided plane may wake) and its factorisation passes per round (up
+    /// to [`CLAMP_PASSES`]), with its trials, finding the coupling and a
+    /// rejection reserved; `None` if not even one pass fits.
+    fn plan(&self, solver: &Solver, fresh: bool, left: u32) -> Option<(usize, usize)> {
+        let p = &self.prices;
+        let trials = if solver.extrapolate { 3 } else { 1 };
+        let mut fixed = p.base.plus(&p.couple).plus(&p.reject);
+        fixed = fixed.plus(&p.trial.times(trials));
+        if fresh {
+            fixed = fixed.plus(&p.linearise);
+        }
+        let pass = p.pass.cost().max(1);
+        let most = if p.planes { 2 } else { 1 };
+        (1..=most).rev().find_map(|rounds| {
+            let before = fixed.plus(&p.round.times(rounds)).cost();
+            let avail = left.checked_sub(before)?;
+            let per = pass.saturating_mul(rounds as u32);
+            let passes = (avail / per).min(CLAMP_PASSES as u32);
+            (passes > 0).then_some((rounds, passes as usize))
+        })
+    }
+
+    /// The work of an iteration: a linearisation if `fresh`, a step of
+    /// `(rounds, passes, coupling found again)`, `trials` forward
+    /// kinematics, and going back if `rejected`.
+    fn iteration_work(
+        &self,
+        fresh: bool,
+        (rounds, passes, couple): (usize, usize, bool),
+        trials: usize,
+        rejected: bool,
+    ) -> Tally {
+        let p = &self.prices;
+        let mut t = p
+            .base
+            .plus(&p.round.times(rounds))
+            .plus(&p.pass.times(passes))
+            .plus(&p.trial.times(trials));
+        if fresh {
+            t = t.plus(&p.linearise);
+        }
+        if couple {
+            t = t.plus(&p.couple);
+        }
+        if rejected {
+            t = t.plus(&p.reject);
+        }
+        t
+    }
+
     /// Levenberg–Marquardt from the current angles; returns (iterations,
     /// converged). Leaves the forward kinematics of the result in `work`.
     fn run(
         &mut self,
         solver: &Solver,
         work: &mut Work<'_, '_, N>,
+        meter: &mut Meter,
     ) -> Result<(u32, bool), SolveError> {
         self.joints.unplaced();
+        meter.add_tally(&self.refresh_work(self.joints.sizes.dofs));
         self.refresh(work)?;
         self.slots.keep();
         let tol2 = solver.tolerance * solver.tolerance;
@@ -138,25 +292,38 @@ impl<const N: usize> Lm<N> {
             if self.slots.worst <= tol2 || self.joints.count == 0 {
                 return Ok((iterations, true));
             }
-            iterations += 1;
             if fresh {
                 self.joints.settle(&self.slots, tol2);
+                self.price();
+            }
+            let Some(plan) = self.plan(solver, fresh, meter.left()) else {
+                // Out of work: what is left is for the next solve.
+                return Ok((iterations, false));
+            };
+            iterations += 1;
+            let linearised = fresh;
+            if fresh {
                 self.joints.linearise(work, &self.slots)?;
                 fresh = false;
             }
-            if !self.system.step(
+            let stepped = self.system.step(
                 work,
                 &mut self.joints,
                 &self.slots,
                 &mut self.rhs,
                 lambda * lambda,
-            ) {
+                plan,
+            );
+            if !stepped {
+                meter.add_tally(&self.iteration_work(linearised, self.system.work, 0, false));
                 lambda *= 4.0;
                 continue;
             }
             let error = self.slots.error;
-            self.trial(solver, work)?;
-            if self.slots.error < error {
+            let trials = self.trial(solver, work)?;
+            let accepted = self.slots.error < error;
+            meter.add_tally(&self.iteration_work(linearised, self.system.work, trials, !accepted));
+            if accepted {
                 let moved = self.slots.accept();
                 fresh = true;
                 lambda = math::max(MIN_DAMPING, lambda / 3.0);
@@ -178,8 +345,8 @@ impl<const N: usize> Lm<N> {
     }
 
     /// Applies the step (and, if it helped but little, once more) and
-    /// evaluates the goals.
-    fn trial(&mut self, solver: &Solver, work: &mut Work<'_, '_, N>) -> Result<(), SolveError> {
+    /// evaluates the goals; returns the forward kinematics made.
+    fn trial(&mut self, solver: &Solver, work: &mut Work<'_, '_, N>) -> Result<usize, SolveError> {
         let error = self.slots.error;
         self.joints.apply(work, MAX_STEP, true);
         self.refresh(work)?;
@@ -192,30 +359,45 @@ impl<const N: usize> Lm<N> {
                 self.joints.back(work);
                 self.joints.apply(work, MAX_STEP, false);
                 self.refresh(work)?;
+                return Ok(3);
             }
+            return Ok(2);
         }
-        Ok(())
+        Ok(1)
     }
 
     /// Solves again from the rest pose and from spread poses of the moving
-    /// joints; keeps the lowest error. Returns (iterations, converged).
+    /// joints, while the work allows; keeps the lowest error. Returns
+    /// (iterations, converged).
     fn restart(
         &mut self,
         solver: &Solver,
         work: &mut Work<'_, '_, N>,
+        meter: &mut Meter,
     ) -> Result<(u32, bool), SolveError> {
         let (mut best, mut best_error) = (self.joints.save(work), self.slots.error);
         let start = best;
         let (mut iterations, mut converged) = (0u32, true);
+        // Each start and the return to the best: a forward kinematics of
+        // every moving joint.
+        let again = self
+            .refresh_work(self.joints.sizes.dofs)
+            .with(Term::Apply, self.joints.count);
         for k in 0..solver.restarts {
+            // This start's first forward kinematics and the way back.
+            if meter.left() < again.cost().saturating_mul(2) {
+                break;
+            }
+            meter.add_tally(&again);
             self.joints.restore(work, &start);
             spread(work, &self.joints, k);
-            let (it, conv) = self.run(solver, work)?;
+            let (it, conv) = self.run(solver, work, meter)?;
             iterations += it;
             if self.slots.error < best_error {
                 (best, best_error, converged) = (self.joints.save(work), self.slots.error, conv);
             }
         }
+        meter.add_tally(&again);
         self.joints.restore(work, &best);
         self.refresh(work).map(|()| (iterations, converged))
     }

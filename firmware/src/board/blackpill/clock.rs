@@ -50,6 +50,8 @@ const _: () = assert!(PLL_N >= 50 && PLL_N <= 432);
 const _: () = assert!(VCO_HZ >= 100_000_000 && VCO_HZ <= 432_000_000);
 const _: () = assert!(PLL_Q >= 2 && PLL_Q <= 15);
 const _: () = assert!(SYSCLK_HZ == 100_000_000);
+// The live loop's solver budget is set for this clock (core `deadline`).
+const _: () = assert!(SYSCLK_HZ == marionette_core::deadline::CLOCK_HZ);
 // RM0383: APB1 at most 50 MHz, APB2 at most 100 MHz.
 const _: () = assert!(PCLK1_HZ <= 50_000_000 && PCLK2_HZ <= 100_000_000);
 // RM0383 table 5 (2.7..3.6 V): 90 MHz < HCLK <= 100 MHz needs 3 wait states,
