@@ -3,7 +3,7 @@
 //! A board keeps one region of flash (or of the emulator's memory) for its
 //! rig and motion tables. This module is the **one owner of its layout**: the
 //! firmware reads it with [`Region::parse_into`], the host writes it with
-//! [`write`] (`marionette sim`, `emulate`, `icount`, `demo` and `flash` all
+//! [`write()`] (`marionette sim`, `emulate`, `icount`, `demo` and `flash` all
 //! go through here) and checks it with the same parse before flashing.
 //!
 //! # Region format version 1 (a small directory)
@@ -24,7 +24,7 @@
 //! entry (entries are in address order and never overlap); every entry lies
 //! inside the region; `reserved` is 0. Each blob carries its own magic,
 //! version and CRC, so the directory's CRC covers only the directory. The
-//! writer ([`write`]) puts the blobs in the order given, each at the next
+//! writer ([`write()`]) puts the blobs in the order given, each at the next
 //! 4-aligned offset after the previous one, with zero padding between them
 //! and after the last one up to a multiple of 4.
 //!
@@ -300,7 +300,7 @@ pub fn directory(bytes: &[u8]) -> Result<Directory<'_>, RegionError> {
     Ok(Directory { bytes, count })
 }
 
-/// The bytes [`write`] needs for `entries`.
+/// The bytes [`write()`] needs for `entries`.
 pub fn len(entries: &[Entry<'_>]) -> Result<usize, RegionError> {
     if entries.is_empty() || entries.len() > MAX_ENTRIES {
         return Err(RegionError::EntryCount(entries.len()));
