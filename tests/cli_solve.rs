@@ -113,9 +113,19 @@ fn reaches_a_reachable_goal_with_the_contracted_json() {
     }
     // The JSON contract: exactly these keys.
     let v = serde_json::to_value(&out).unwrap();
+    // (Extended by #20 with met, unreachable, tolerance, restarts.)
     assert_eq!(
         keys(&v),
-        set(&["segments", "goals", "iterations", "converged"])
+        set(&[
+            "segments",
+            "goals",
+            "iterations",
+            "converged",
+            "met",
+            "unreachable",
+            "tolerance",
+            "restarts"
+        ])
     );
     let segs = v["segments"].as_array().unwrap();
     assert_eq!(segs.len(), 13);
@@ -125,7 +135,18 @@ fn reaches_a_reachable_goal_with_the_contracted_json() {
         assert_eq!(s["rotation"].as_array().unwrap().len(), 4);
     }
     for g in v["goals"].as_array().unwrap() {
-        assert_eq!(keys(g), set(&["segment", "touch_point", "distance"]));
+        assert_eq!(
+            keys(g),
+            set(&[
+                "segment",
+                "touch_point",
+                "distance",
+                "active",
+                "met",
+                "reach"
+            ])
+        );
+        assert_eq!(g["met"], true);
         assert_eq!(g["segment"], "r_forearm");
     }
     assert!(v["iterations"].is_u64() && v["converged"].is_boolean());
@@ -294,4 +315,83 @@ fn bad_inputs_name_the_file_and_the_field() {
         }
     }
     assert!(failures.is_empty(), "\n{}", failures.join("\n"));
+}
+
+/// A small deterministic generator (xorshift), for targets.
+fn uniform(state: &mut u64) -> f64 {
+    *state ^= *state << 13;
+    *state ^= *state >> 7;
+    *state ^= *state << 17;
+    (*state >> 11) as f64 / (1u64 << 53) as f64
+}
+
+#[test]
+fn each_goal_says_whether_it_is_met_and_which_cannot_be() {
+    // The left sole at its rest position (met), the right palm 2 m above
+    // the pelvis (out of reach), the head pulled with weight 0 (inactive).
+    let doc = r#"{"goals": [
+        {"segment": "l_foot", "target": [0.065, 0.0, 0.03], "weight": 1},
+        {"segment": "r_forearm", "target": [0, 2.44, 0], "weight": 1},
+        {"segment": "head", "target": [1, 1, 1], "weight": 0}]}"#;
+    let out = solve(doc);
+    let met: Vec<bool> = out.goals.iter().map(|g| g.met).collect();
+    assert_eq!(met, [true, false, false]);
+    assert_eq!(out.met, 1);
+    assert_eq!(out.unreachable, [1]);
+    assert!(!out.goals[2].active && out.goals[0].active);
+    // The right palm's reach from the fixed pelvis, by hand: torso 0.05,
+    // shoulder |(-0.12, 0.22, 0)| = 0.250599, upper arm 0.16, palm 0.15.
+    let reach = 0.05 + (0.12f64.powi(2) + 0.22f64.powi(2)).sqrt() + 0.16 + 0.15;
+    let got = f64::from(out.goals[1].reach.unwrap());
+    assert!((got - reach).abs() < 1e-5, "{got} {reach}");
+    // No pose gets it closer than the target's distance less the reach.
+    assert!(f64::from(out.goals[1].distance) >= 2.0 - reach - 1e-5);
+    let text = summary("humanoid16", &out);
+    assert!(text.contains("1 of 3 goal(s) met"), "{text}");
+    assert!(text.contains("unreachable: goals[1] (r_forearm)"), "{text}");
+    assert!(text.contains("inactive (weight 0)"), "{text}");
+    // "converged" keeps its meaning: the iteration stopped, goals missed.
+    assert!(out.converged, "{text}");
+    assert!(text.contains("converged (the iteration stopped)"), "{text}");
+}
+
+#[test]
+fn restarts_meet_reachable_goals_that_one_local_solve_misses() {
+    // Reachable right-palm targets: the arm's forward kinematics (above) at
+    // random angles within its limits (pitch [-135, 45]°, roll [-100, 10]°,
+    // elbow [-130, 0]°).
+    let mut seed = 0x2545_F491_4F6C_DD1D_u64;
+    let offline = Solver::DEFAULT
+        .with_iterations(100)
+        .with_restarts(marionette_host::cmd::solve::DEFAULT_RESTARTS);
+    let local = Solver::DEFAULT.with_iterations(100);
+    let (mut met_offline, mut met_local) = (0, 0);
+    let n = 60;
+    for _ in 0..n {
+        let mut angle = |lo: f64, hi: f64| (lo + (hi - lo) * uniform(&mut seed)).to_radians();
+        let t = right_palm(angle(-135.0, 45.0), angle(-100.0, 10.0), angle(-130.0, 0.0));
+        let doc = format!(
+            r#"{{"goals": [{{"segment": "r_forearm", "target": [{}, {}, {}], "weight": 1}}]}}"#,
+            t[0], t[1], t[2]
+        );
+        for (solver, count) in [(&offline, &mut met_offline), (&local, &mut met_local)] {
+            let out = solve_text(&rig(), &doc, "goals.json", solver).unwrap();
+            let g = &out.goals[0];
+            // `met` is the distance, measured here, within the tolerance.
+            let d: f64 = t
+                .iter()
+                .zip(g.touch_point)
+                .map(|(a, b)| (a - f64::from(b)).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            assert_eq!(g.met, d <= 1e-4 + 1e-6, "{d} {g:?}");
+            assert!(out.unreachable.is_empty());
+            *count += usize::from(g.met);
+        }
+    }
+    assert_eq!(met_offline, n, "restarts meet every reachable target");
+    assert!(
+        met_local < n,
+        "one local solve misses some ({met_local} of {n})"
+    );
 }

@@ -14,7 +14,7 @@
 //!
 //! Inputs that carry a CRC can be "fixed up" by the harness, so that mutations
 //! reach the decoders behind the CRC (selected by a leading mode byte, see
-//! each target). Each target returns an [`Outcome`] so the replay can check
+//! each target). Each target returns an [`Outcome`](crate::fuzz_targets::Outcome) so the replay can check
 //! that the corpora reach the accepting paths, not just the rejections.
 
 use glam::{Quat, Vec3};

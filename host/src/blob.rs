@@ -1,7 +1,7 @@
 //! The table blob writer: the one writer of the format that
 //! [`marionette_core::table`] documents and reads.
 //!
-//! [`write`] takes an in-memory [`TableSpec`] (axes, segment names, `f32`
+//! [`write()`] takes an in-memory [`TableSpec`] (axes, segment names, `f32`
 //! samples as `[sample][segment]` position + rotation, the cell-validity
 //! mask, the rig hash and, for clip tables, the durations), checks it,
 //! quantizes every sample with the core's [`quant`] functions (the ones the

@@ -5,14 +5,20 @@
 //! calls).
 
 pub mod blob;
+pub mod board;
 pub mod build;
+pub mod capacity;
 pub mod cmd;
 pub mod flash;
 pub mod icount;
 pub mod import;
 pub mod link;
+pub mod live;
 pub mod locate;
 pub mod perform;
 pub mod qemu;
+pub mod refusal;
 pub mod render;
 pub mod rigfile;
+pub mod save;
+pub mod sender;

@@ -80,6 +80,12 @@ impl Link {
         }
     }
 
+    /// How long the link takes to carry `bytes` bytes back to back.
+    #[must_use]
+    pub fn transfer_time(self, bytes: usize) -> std::time::Duration {
+        std::time::Duration::from_secs_f64(bytes as f64 / self.bytes_per_second())
+    }
+
     /// A short name for tables and reports.
     #[must_use]
     pub fn name(self) -> String {

@@ -6,7 +6,14 @@ use std::process::ExitCode;
 
 /// Marionette: drive a puppet rig from motion tables and live trackers.
 #[derive(Parser)]
-#[command(name = "marionette", version, about)]
+#[command(
+    name = "marionette",
+    version,
+    about,
+    after_help = "Exit codes: 0 success; 1 error (bad input, I/O, board and native core disagree); \
+                  2 bad command line; 3 the board never armed (its Status reason is printed); \
+                  4 the board stopped on a fault."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -42,6 +49,10 @@ enum Command {
     Record(cmd::record::Args),
     /// Find a servo's limits from the keyboard on a board (or the emulated one) and write them into the rig file.
     Calibrate(cmd::calibrate::Args),
+    /// Check a rig file: summary, hash, which boards can drive it, likely slips.
+    Rig(cmd::rig::Args),
+    /// Perform from a live source (VMC / OSC over UDP) on the emulated or a real board.
+    Live(cmd::live::Args),
 }
 
 fn main() -> ExitCode {
@@ -61,12 +72,17 @@ fn main() -> ExitCode {
         Command::Solve(args) => cmd::solve::run(&args),
         Command::Record(args) => cmd::record::run(&args),
         Command::Calibrate(args) => cmd::calibrate::run(&args),
+        Command::Rig(args) => cmd::rig::run(&args),
+        Command::Live(args) => cmd::live::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("marionette: {e}");
-            ExitCode::FAILURE
+            match e.downcast_ref::<marionette_host::refusal::Stop>() {
+                Some(stop) => ExitCode::from(stop.exit_code()),
+                None => ExitCode::FAILURE,
+            }
         }
     }
 }

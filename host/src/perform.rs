@@ -5,7 +5,7 @@
 //! A session is the byte stream a tracker bridge sends: `Hello`, `Arm`, one
 //! `TrackerFrame` per recorded time step, and finally `Disarm`. The table
 //! region holds the rig blob and the table blob behind a small directory
-//! ([`region`], the core's [`marionette_core::region`]), exactly as the
+//! ([`region()`], the core's [`marionette_core::region`]), exactly as the
 //! firmware reads it.
 //!
 //! The native run uses each frame's timestamp as the board clock and calls
@@ -53,6 +53,16 @@ pub enum PerformError {
         time_us: u64,
         /// Sensors found.
         count: usize,
+    },
+    /// A recording's sensor id is beyond what a tracker frame carries.
+    #[error(
+        "recording: sensor {sensor} at time {time_us} µs; tracker frames carry sensor ids 0..{MAX_SENSORS}"
+    )]
+    SensorId {
+        /// The time step.
+        time_us: u64,
+        /// The sensor id.
+        sensor: u8,
     },
     /// A table could not be built.
     #[error("building a table: {0}")]
@@ -143,6 +153,12 @@ pub fn frames(samples: &[TrackerSample]) -> Result<Vec<TrackerFrame>, PerformErr
         let time_us = group.first().map_or(0, |s| s.time_us);
         let mut sensors = List::new();
         for s in group {
+            if usize::from(s.sensor) >= MAX_SENSORS {
+                return Err(PerformError::SensorId {
+                    time_us,
+                    sensor: s.sensor,
+                });
+            }
             let q = s.orientation;
             let sensor = Sensor {
                 id: s.sensor,
@@ -304,6 +320,9 @@ pub struct Run {
     /// The deepest stack the emulated board reached, bytes (measured by
     /// painting; `None` for a native run).
     pub board_stack: Option<u32>,
+    /// How the emulated board stopped on a fault (a non-zero exit status,
+    /// a reset), if it did; `None` for a clean end or a native run.
+    pub fault: Option<String>,
 }
 
 /// Runs a session natively through the core.
@@ -745,14 +764,41 @@ fn feetech_packet(series: FeetechSeries, b: &[u8]) -> Option<(Packet, &[u8])> {
     Some(((address, items), b.get(end..)?))
 }
 
+/// Messages of a [`session`] up to and including its `Arm` (`Hello`, `Arm`).
+pub const OPENING: usize = 2;
+
+/// The longest the emulated board may take to answer `Hello` and `Arm`: it
+/// answers at once (a few ms), so this only bounds a board that hangs.
+pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Whether the board's replies so far hold the answer to `Arm` (sequence 0).
+fn arm_answered(bytes: &[u8]) -> bool {
+    decode_replies(bytes)
+        .iter()
+        .any(|m| matches!(m, Message::Ack(a) if a.seq == 0))
+}
+
+/// Whether the replies hold an `Ack` of `Arm` that says yes.
+fn arm_accepted(bytes: &[u8]) -> bool {
+    decode_replies(bytes)
+        .iter()
+        .any(|m| matches!(m, Message::Ack(a) if a.seq == 0 && a.ok))
+}
+
 /// Runs a session on the emulated board with `region_file` in its table
-/// region, streaming as fast as the link takes it. `channels` is the number
-/// of servo channels per output frame (the rig's highest channel + 1) and
-/// `frames` the number of frame-driven outputs expected. Messages are sent as
-/// `pacing` says; the last one (the `Disarm`) is sent after the board has
-/// answered every frame and a further `pause` (a pause longer than the
-/// fail-safe time-out exercises it). The servo link is decoded by the rig's
-/// output ([`ServoFormat`]).
+/// region. `channels` is the number of servo channels per output frame (the
+/// rig's highest channel + 1) and `frames` the number of frame-driven
+/// outputs expected. Messages are sent as `pacing` says; the last one (the
+/// `Disarm`) is sent after the board has answered every frame and a further
+/// `pause` (a pause longer than the fail-safe time-out exercises it).
+///
+/// The board answers `Hello` and `Arm` first ([`OPENING`], within
+/// [`ANSWER_TIMEOUT`]). If it refuses to arm, the frames are not sent (it
+/// would drive nothing): the session ends with its `Disarm`, and the run's
+/// replies say why (see [`crate::refusal`]). If it never answers, QEMU is
+/// stopped and the replies are empty. A board that exits with an error or
+/// resets is reported in [`Run::fault`]. The servo link is decoded by the
+/// rig's output ([`ServoFormat`]).
 pub fn emulate(
     region_file: &Path,
     session: &[Sent],
@@ -768,17 +814,42 @@ pub fn emulate(
     let format = ServoFormat::of_region(&region_bytes, channels)
         .unwrap_or(ServoFormat::Maestro { channels });
     let elf = qemu::build_firmware("perform")?;
+    let span = session.last().map_or(0, |l| {
+        let first = session.first().map_or(0, |f| f.time_us);
+        l.time_us.wrapping_sub(first)
+    });
+    let streaming = match pacing {
+        Pacing::RealTime => Duration::from_micros(u64::from(span)),
+        Pacing::AsFastAsPossible => Duration::ZERO,
+    };
     let config = Config {
         tables: Some(region_file.to_path_buf()),
-        timeout: Duration::from_secs(120),
+        timeout: Duration::from_secs(120) + streaming + pause,
         ..Config::new(elf)
     };
     let mut emulator = qemu::Emulator::start(&config)?;
     let (body, last) = session.split_at(session.len().saturating_sub(1));
-    pace(body, pacing, |bytes| emulator.send(bytes))?;
-    // Let the board finish the frames before it is told to stop.
-    emulator.wait_servo_bytes(format.bytes_for(frames))?;
-    std::thread::sleep(pause);
+    let (opening, frames_part) = body.split_at(OPENING.min(body.len()));
+    pace(opening, pacing, |bytes| emulator.send(bytes))?;
+    let answered = emulator.wait_replies_within(arm_answered, ANSWER_TIMEOUT)?;
+    if !answered {
+        let replies = decode_replies(&emulator.replies_so_far());
+        let run = Run {
+            replies,
+            fault: Some(format!(
+                "it did not answer Hello and Arm within {} s",
+                ANSWER_TIMEOUT.as_secs()
+            )),
+            ..Run::default()
+        };
+        return Ok((run, Vec::new()));
+    }
+    if arm_accepted(&emulator.replies_so_far()) {
+        pace(frames_part, pacing, |bytes| emulator.send(bytes))?;
+        // Let the board finish the frames before it is told to stop.
+        emulator.wait_servo_bytes(format.bytes_for(frames))?;
+        std::thread::sleep(pause);
+    }
     for sent in last {
         emulator.send(&sent.bytes)?;
     }
@@ -786,15 +857,31 @@ pub fn emulate(
     let mut targets = format.decode(&out.servo);
     let rest = targets.split_off(frames.min(targets.len()));
     let replies = decode_replies(&out.tracker);
+    let fault = board_fault(&out);
     Ok((
         Run {
             frame_targets: targets,
             rest_targets: rest,
             replies,
             board_stack: crate::icount::stack_bytes(&out.console),
+            fault,
         },
         out.servo,
     ))
+}
+
+/// How a finished emulated board stopped on a fault, if it did.
+fn board_fault(out: &qemu::Output) -> Option<String> {
+    let boots = out.console.lines().filter(|l| l.trim() == "boot").count();
+    match out.status {
+        Some(0) if boots <= 1 => None,
+        Some(0) => Some(format!(
+            "it reset during the session (booted {boots} times)"
+        )),
+        Some(2) => Some("its serial links failed (exit status 2)".into()),
+        Some(n) => Some(format!("the firmware exited with status {n}")),
+        None => Some("QEMU was killed by a signal".into()),
+    }
 }
 
 /// Splits a Maestro Set Target byte stream into output frames of `channels`
@@ -825,4 +912,55 @@ pub fn decode_replies(bytes: &[u8]) -> Vec<Message> {
             wire::decode_frame(buf.get(..n)?).ok()
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ended(status: Option<i32>, console: &str) -> qemu::Output {
+        qemu::Output {
+            status,
+            console: console.into(),
+            diagnostics: String::new(),
+            tracker: Vec::new(),
+            servo: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_board_that_ends_badly_is_a_fault() {
+        assert_eq!(board_fault(&ended(Some(0), "boot\nstack 100\n")), None);
+        let reset = board_fault(&ended(Some(0), "boot\nboot\n")).unwrap();
+        assert!(reset.contains("reset"), "{reset}");
+        let link = board_fault(&ended(Some(2), "boot\n")).unwrap();
+        assert!(link.contains("serial links"), "{link}");
+        assert!(
+            board_fault(&ended(None, "boot\n"))
+                .unwrap()
+                .contains("signal")
+        );
+    }
+
+    #[test]
+    fn the_arm_answer_is_read_from_the_replies() {
+        let mut bytes = encode(&Message::Status(marionette_core::wire::Status {
+            protocol_version: PROTOCOL_VERSION,
+            armed: false,
+            table_ok: false,
+            reason: marionette_core::wire::StatusReason::NoTable,
+            errors: marionette_core::wire::ErrorCounters::default(),
+            frames_ok: 1,
+            request_seq: None,
+            state: marionette_core::wire::State::Unready,
+            trips: 0,
+        }))
+        .unwrap();
+        assert!(!arm_answered(&bytes));
+        let no = encode(&Message::Ack(wire::Ack { seq: 0, ok: false })).unwrap();
+        bytes.extend_from_slice(&no);
+        assert!(arm_answered(&bytes) && !arm_accepted(&bytes));
+        let yes = encode(&Message::Ack(wire::Ack { seq: 0, ok: true })).unwrap();
+        assert!(arm_accepted(&yes));
+    }
 }

@@ -231,7 +231,7 @@ impl Emulator {
             .prefix("marionette-qemu")
             .tempdir()?;
         let sockets = [dir.path().join("uart0.sock"), dir.path().join("uart1.sock")];
-        let mut cmd = qemu_command(&qemu, config, &sockets)?;
+        let mut cmd = qemu_command(&qemu, config, &Uarts::Sockets(&sockets))?;
         let mut child = cmd.spawn()?;
         let mut readers = Vec::new();
         let stdout = child
@@ -324,6 +324,37 @@ impl Emulator {
         Ok(())
     }
 
+    /// Waits at most `within` (and never past the run's deadline) until the
+    /// board's replies satisfy `done`; returns whether they did. Stops
+    /// early if the board exits.
+    pub fn wait_replies_within(
+        &mut self,
+        done: impl Fn(&[u8]) -> bool,
+        within: Duration,
+    ) -> Result<bool, QemuError> {
+        let give_up = Instant::now() + within;
+        loop {
+            if self.tracker_out.check(&done) {
+                return Ok(true);
+            }
+            self.remaining()?;
+            if Instant::now() > give_up || self.child.try_wait()?.is_some() {
+                return Ok(self.tracker_out.check(&done));
+            }
+            thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// A copy of the bytes the board has sent on its tracker link so far.
+    #[must_use]
+    pub fn replies_so_far(&self) -> Vec<u8> {
+        self.tracker_out
+            .0
+            .lock()
+            .map(|v| v.clone())
+            .unwrap_or_default()
+    }
+
     /// Bytes received on the servo bus so far (and clears them).
     pub fn take_servo(&mut self) -> Vec<u8> {
         self.servo_out.take()
@@ -379,12 +410,116 @@ impl Drop for Emulator {
     }
 }
 
-/// The QEMU command line for `config`, with UARTs on `sockets`.
-fn qemu_command(
-    qemu: &Path,
-    config: &Config,
-    sockets: &[PathBuf; 2],
-) -> Result<Command, QemuError> {
+/// The emulated board as a person meets it: UART0 (the tracker link) on a
+/// pseudo-terminal, a serial device any program can open (`marionette
+/// stream --port`), and UART1 (the servo bus) written raw to a file. QEMU
+/// notices a newly opened pty only on a one-second poll, so a host says
+/// `Hello` until the board answers. Dropping it kills QEMU.
+pub struct PtyBoard {
+    child: Child,
+    pty: PathBuf,
+    console: Collected,
+    readers: Vec<JoinHandle<()>>,
+}
+
+impl PtyBoard {
+    /// Boots `elf` with `region` in its table region, the servo bus to
+    /// `servo`, and waits for QEMU to name its pty (`char device
+    /// redirected to /dev/pts/N`, on its stdout).
+    pub fn start(elf: &Path, region: &Path, servo: &Path) -> Result<Self, QemuError> {
+        use std::io::BufRead;
+        let qemu = check_qemu()?;
+        let config = Config {
+            tables: Some(region.to_path_buf()),
+            ..Config::new(elf)
+        };
+        let mut cmd = qemu_command(&qemu, &config, &Uarts::Pty { servo })?;
+        let mut child = cmd.spawn()?;
+        let stdout = child
+            .stdout
+            .take()
+            .ok_or_else(|| std::io::Error::other("QEMU stdout not captured"))?;
+        let stderr = child
+            .stderr
+            .take()
+            .ok_or_else(|| std::io::Error::other("QEMU stderr not captured"))?;
+        let (_, h) = Collected::spawn(stderr);
+        let mut lines = std::io::BufReader::new(stdout);
+        let mut line = String::new();
+        let pty = loop {
+            line.clear();
+            if lines.read_line(&mut line)? == 0 {
+                let _ = child.kill();
+                return Err(std::io::Error::other("QEMU exited before naming its pty").into());
+            }
+            if let Some(rest) = line.split("redirected to ").nth(1)
+                && let Some(dev) = rest.split_whitespace().next()
+            {
+                break PathBuf::from(dev);
+            }
+        };
+        let (console, c) = Collected::spawn(lines);
+        Ok(Self {
+            child,
+            pty,
+            console,
+            readers: vec![h, c],
+        })
+    }
+
+    /// The tracker link's device, e.g. `/dev/pts/3`.
+    #[must_use]
+    pub fn pty(&self) -> &Path {
+        &self.pty
+    }
+
+    /// Waits up to `limit` for the firmware to exit; its exit status (`None`
+    /// if it is still running, or was killed by a signal).
+    pub fn wait(&mut self, limit: Duration) -> Result<Option<i32>, QemuError> {
+        let deadline = Instant::now() + limit;
+        while Instant::now() < deadline {
+            if let Some(status) = self.child.try_wait()? {
+                for r in self.readers.drain(..) {
+                    let _ = r.join();
+                }
+                return Ok(status.code());
+            }
+            thread::sleep(Duration::from_millis(20));
+        }
+        Ok(None)
+    }
+
+    /// What the firmware printed so far (semihosting).
+    #[must_use]
+    pub fn console(&self) -> String {
+        self.console
+            .0
+            .lock()
+            .map(|v| String::from_utf8_lossy(&v).into_owned())
+            .unwrap_or_default()
+    }
+}
+
+impl Drop for PtyBoard {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Where the two UARTs go.
+enum Uarts<'a> {
+    /// Both on Unix sockets QEMU serves (if `config.serial`).
+    Sockets(&'a [PathBuf; 2]),
+    /// UART0 on a pseudo-terminal, UART1 to a file.
+    Pty {
+        /// The servo bus's file.
+        servo: &'a Path,
+    },
+}
+
+/// The QEMU command line for `config`, with UARTs as `uarts` says.
+fn qemu_command(qemu: &Path, config: &Config, uarts: &Uarts<'_>) -> Result<Command, QemuError> {
     let mut cmd = Command::new(qemu);
     cmd.args(["-machine", "mps2-an386", "-cpu", "cortex-m4"])
         .args(["-display", "none", "-monitor", "none"])
@@ -392,7 +527,12 @@ fn qemu_command(
     if config.icount {
         cmd.args(["-icount", "shift=7,align=off"]);
     }
-    if config.serial {
+    if let Uarts::Pty { servo } = uarts {
+        cmd.args(["-chardev", "pty,id=u0", "-serial", "chardev:u0"])
+            .arg("-chardev")
+            .arg(format!("file,id=u1,path={}", servo.display()))
+            .args(["-serial", "chardev:u1"]);
+    } else if let (Uarts::Sockets(sockets), true) = (uarts, config.serial) {
         for (i, sock) in sockets.iter().enumerate() {
             cmd.arg("-chardev")
                 .arg(format!(
@@ -456,8 +596,12 @@ mod tests {
             tables: Some(blob.path().to_path_buf()),
             ..Config::new("fw.elf")
         };
-        let err =
-            qemu_command(Path::new(QEMU), &config, &[PathBuf::new(), PathBuf::new()]).unwrap_err();
+        let err = qemu_command(
+            Path::new(QEMU),
+            &config,
+            &Uarts::Sockets(&[PathBuf::new(), PathBuf::new()]),
+        )
+        .unwrap_err();
         assert!(matches!(err, QemuError::TablesTooLarge { .. }), "{err}");
     }
 }

@@ -57,7 +57,10 @@ pub enum RenderError {
     #[error("{0}: unknown picture format (use a .png or .svg file name)")]
     Format(PathBuf),
     /// The picture size is unusable.
-    #[error("picture size {0}x{1} is too small (at least 200x200)")]
+    #[error(
+        "picture size {0}x{1} is out of range: each side {MIN_SIDE} to {MAX_SIDE} pixels, \
+         at most {MAX_PIXELS} pixels in all"
+    )]
     Size(u32, u32),
     /// The pose does not fit the body.
     #[error("pose: {0}")]
@@ -100,6 +103,24 @@ fn de<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
 }
 
+/// The shortest side of a picture, pixels.
+pub const MIN_SIDE: u32 = 200;
+/// The longest side of a picture, pixels.
+pub const MAX_SIDE: u32 = 8192;
+/// The most pixels in a picture: 2²⁵ (a PNG is drawn in memory at 3 bytes a
+/// pixel: 96 MiB), checked before any is taken.
+pub const MAX_PIXELS: u64 = 1 << 25;
+
+/// Whether a picture of `w` × `h` pixels may be drawn.
+pub fn check_size(w: u32, h: u32) -> Result<(), RenderError> {
+    let side = MIN_SIDE..=MAX_SIDE;
+    if side.contains(&w) && side.contains(&h) && u64::from(w) * u64::from(h) <= MAX_PIXELS {
+        Ok(())
+    } else {
+        Err(RenderError::Size(w, h))
+    }
+}
+
 /// The picture formats.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Format {
@@ -110,9 +131,7 @@ enum Format {
 impl Format {
     /// The format of `path` by extension; checks the size too.
     fn of(path: &Path, (w, h): (u32, u32)) -> Result<Format, RenderError> {
-        if w < 200 || h < 200 {
-            return Err(RenderError::Size(w, h));
-        }
+        check_size(w, h)?;
         let ext = path
             .extension()
             .and_then(|e| e.to_str())
@@ -126,7 +145,9 @@ impl Format {
 }
 
 /// Runs a drawing function on the PNG or SVG backend for `$path` and writes
-/// the file. The body is written once and instantiated for both backends.
+/// the file through [`crate::save`]: drawn into a temporary file beside it
+/// (folders made), renamed over `$path` only when complete. The body is
+/// written once and instantiated for both backends.
 macro_rules! with_backend {
     ($format:expr, $path:expr, $size:expr, |$root:ident| $draw:expr) => {{
         let path: &Path = $path;
@@ -134,18 +155,20 @@ macro_rules! with_backend {
             path: path.to_path_buf(),
             reason,
         };
+        let temp = crate::save::temp_beside(path).map_err(|e| fail(e.to_string()))?;
         match $format {
             Format::Png => {
-                let $root = BitMapBackend::new(path, $size).into_drawing_area();
+                let $root = BitMapBackend::new(temp.path(), $size).into_drawing_area();
                 $draw.map_err(fail)?;
-                $root.present().map_err(|e| fail(de(e)))
+                $root.present().map_err(|e| fail(de(e)))?;
             }
             Format::Svg => {
-                let $root = SVGBackend::new(path, $size).into_drawing_area();
+                let $root = SVGBackend::new(temp.path(), $size).into_drawing_area();
                 $draw.map_err(fail)?;
-                $root.present().map_err(|e| fail(de(e)))
+                $root.present().map_err(|e| fail(de(e)))?;
             }
         }
+        crate::save::commit(temp, path).map_err(|e| fail(e.to_string()))
     }};
 }
 

@@ -96,6 +96,23 @@
 //! joint = [{ mocap = "rradius", segment = "r_forearm" }]   # entries as above
 //! ```
 //!
+//! ```toml
+//! [live]                         # host only, optional: `marionette live`'s sources
+//! [[live.sensor]]                # a VMC bone (Unity humanoid name, /VMC/Ext/Bone/Pos)
+//! name = "RightHand"             # or tracker serial (/VMC/Ext/Tra/Pos) -> a sensor id
+//! sensor = 0                     # 0 ..= 15, unique; names unique
+//! [[live.param]]                 # a plain OSC address -> a parameter, sent as `Params`
+//! address = "/marionette/fader1" # starts with '/'; unique
+//! param = 0                      # the entries cover params 0 ..= k-1, each once
+//! scale = 1.0                    # value = offset + scale * first argument (default 1)
+//! offset = 0.0                   # (default 0; also the value until the address is heard)
+//! ```
+//!
+//! A `[[live.sensor]]` name that is a Unity humanoid bone (`Hips`,
+//! `RightHand`, …; see `host/src/live.rs`) reads that bone; any other name
+//! reads the tracker of that serial. `Params` overrides parameters `0..k`
+//! on the board, so `[[live.param]]` must name each of `0..k` once.
+//!
 //! `[[retarget.joint]]` is the default map (used when a build spec names
 //! none); each `[[retarget.map]]` is a complete alternative map for another
 //! mocap skeleton (different joint names or rest pose), with its own
@@ -162,6 +179,37 @@ pub struct RetargetMap {
     pub joints: Vec<RetargetJoint>,
 }
 
+/// `[[live.sensor]]`: a live source's name for a sensor.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LiveSensor {
+    /// The VMC bone name or tracker serial.
+    pub name: String,
+    /// The sensor id it becomes.
+    pub sensor: u8,
+}
+
+/// `[[live.param]]`: a plain OSC address driving a parameter.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LiveParam {
+    /// The OSC address.
+    pub address: String,
+    /// The parameter index.
+    pub param: u8,
+    /// value = offset + scale · argument.
+    pub scale: f32,
+    /// The value's offset, and the value until the address is heard.
+    pub offset: f32,
+}
+
+/// The `[live]` table: how `marionette live` maps a source's names.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LiveMap {
+    /// Sensors, in file order.
+    pub sensors: Vec<LiveSensor>,
+    /// Parameters, sorted by parameter index (`0..k`).
+    pub params: Vec<LiveParam>,
+}
+
 /// A loaded rig file.
 #[derive(Clone, Debug)]
 pub struct RigFile {
@@ -175,6 +223,8 @@ pub struct RigFile {
     pub retarget: Vec<RetargetJoint>,
     /// The named alternative maps (`[[retarget.map]]`), in file order.
     pub retarget_maps: Vec<RetargetMap>,
+    /// `marionette live`'s name map (`[live]`; empty without one).
+    pub live: LiveMap,
 }
 
 impl RigFile {
@@ -234,14 +284,59 @@ fn named<'a>(desc: &RigDesc<'static>, name: &'a str, segment_names: &'a [String]
     }
 }
 
-/// Reads and checks a rig file.
+/// The largest rig file read, bytes: a full rig of [`MAX_SEGMENTS`]
+/// segments with every comment fits in a few tens of kilobytes.
+pub const MAX_FILE_BYTES: u64 = 1 << 20;
+
+/// Reads and checks a rig file (at most [`MAX_FILE_BYTES`], checked before
+/// it is read).
 pub fn load(path: &Path) -> Result<RigFile, RigFileError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| RigFileError::Io {
+    let io = |source| RigFileError::Io {
         file: file.clone(),
         source,
-    })?;
+    };
+    let len = std::fs::metadata(path).map_err(io)?.len();
+    if len > MAX_FILE_BYTES {
+        return Err(RigFileError::At {
+            file,
+            line: 0,
+            field: "rig".into(),
+            message: format!(
+                "the file is {len} bytes; a rig file is at most {MAX_FILE_BYTES} (a rig holds at most \
+                 {MAX_SEGMENTS} segments)"
+            ),
+        });
+    }
+    let text = std::fs::read_to_string(path).map_err(io)?;
     parse(&text, &file)
+}
+
+/// Counts the `[[segment]]` and `[[servo]]` table headers before the TOML
+/// is parsed, so that a file of far too many is refused before its syntax
+/// tree is built; the line of the first one too many is named.
+fn check_counts(src: &Source<'_>) -> Result<(), RigFileError> {
+    let limits = [("segment", MAX_SEGMENTS), ("servo", MAX_SERVOS)];
+    for (table, most) in limits {
+        let header = format!("[[{table}]]");
+        let mut offset = 0;
+        let mut count = 0;
+        for line in src.text.split_inclusive('\n') {
+            let squeezed: String = line.chars().filter(|c| !c.is_whitespace()).collect();
+            if squeezed.starts_with(&header) {
+                count += 1;
+                if count > most {
+                    return Err(src.err(
+                        &(offset..offset),
+                        format!("{table}[{most}]"),
+                        format!("more than {most} [[{table}]] tables (the most a rig holds)"),
+                    ));
+                }
+            }
+            offset += line.len();
+        }
+    }
+    Ok(())
 }
 
 /// The rig blob of a loaded rig file (see `marionette_core::rig`).
@@ -260,9 +355,10 @@ pub fn to_blob(rig: &RigFile) -> Result<Vec<u8>, RigFileError> {
 /// Writes the rig blob of a rig file to `out`.
 pub fn write_blob(rig: &RigFile, out: &Path) -> Result<(), RigFileError> {
     let blob = to_blob(rig)?;
-    std::fs::write(out, blob).map_err(|source| RigFileError::Io {
+    let file = Path::new(&rig.file);
+    crate::save::save(out, &blob, &[("the rig file", file)]).map_err(|e| RigFileError::Io {
         file: out.display().to_string(),
-        source,
+        source: std::io::Error::other(e.to_string()),
     })
 }
 
@@ -304,6 +400,32 @@ struct RawRig {
     #[serde(default)]
     goal: Vec<S<RawGoal>>,
     retarget: Option<S<RawRetarget>>,
+    live: Option<S<RawLive>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLive {
+    #[serde(default)]
+    sensor: Vec<S<RawLiveSensor>>,
+    #[serde(default)]
+    param: Vec<S<RawLiveParam>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLiveSensor {
+    name: S<String>,
+    sensor: S<u8>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLiveParam {
+    address: S<String>,
+    param: S<u8>,
+    scale: Option<S<f32>>,
+    offset: Option<S<f32>>,
 }
 
 #[derive(Deserialize)]
@@ -637,6 +759,7 @@ fn describe(i: &Invalid) -> String {
 /// Reads a rig file's text (`file` names it in errors).
 pub fn parse(text: &str, file: &str) -> Result<RigFile, RigFileError> {
     let src = Source { text, file };
+    check_counts(&src)?;
     let raw: RawRig = toml::from_str(text).map_err(|e| src.toml_err(&e))?;
     Builder {
         src: &src,
@@ -807,6 +930,7 @@ impl Builder<'_, '_> {
         desc.goals = self.goals(&raw.goal)?;
         let retarget = self.retarget(raw.retarget.as_ref())?;
         let retarget_maps = self.retarget_maps(raw.retarget.as_ref())?;
+        let live = self.live(raw.live.as_ref())?;
         let rig = RigFile {
             file: self.src.file.to_string(),
             name: raw.name.get_ref().clone(),
@@ -814,6 +938,7 @@ impl Builder<'_, '_> {
             desc,
             retarget,
             retarget_maps,
+            live,
         };
         self.check(&rig.desc())?;
         Ok(rig)
@@ -1489,6 +1614,82 @@ impl Builder<'_, '_> {
             }
         }
         self.retarget_joints(&r.joint, "retarget.joint", out)
+    }
+
+    /// The `[live]` table: unique non-empty names and sensor ids; OSC
+    /// addresses unique and starting with '/'; parameters `0..k` each once,
+    /// with finite scale and offset.
+    fn live(&self, raw: Option<&S<RawLive>>) -> Result<LiveMap, RigFileError> {
+        let Some(raw) = raw else {
+            return Ok(LiveMap::default());
+        };
+        let mut map = LiveMap::default();
+        for (i, v) in raw.get_ref().sensor.iter().enumerate() {
+            let v = v.get_ref();
+            let path = format!("live.sensor[{i}]");
+            let name = v.name.get_ref();
+            if name.is_empty() || map.sensors.iter().any(|s| &s.name == name) {
+                let why = format!("{name:?} is empty or named twice");
+                return Err(self.err(&v.name, &format!("{path}.name"), why));
+            }
+            let id = *v.sensor.get_ref();
+            if usize::from(id) >= marionette_core::wire::MAX_SENSORS
+                || map.sensors.iter().any(|s| s.sensor == id)
+            {
+                let why = format!("{id} is out of range (0 ..= 15) or used twice");
+                return Err(self.err(&v.sensor, &format!("{path}.sensor"), why));
+            }
+            map.sensors.push(LiveSensor {
+                name: name.clone(),
+                sensor: id,
+            });
+        }
+        for (i, v) in raw.get_ref().param.iter().enumerate() {
+            let v = v.get_ref();
+            let path = format!("live.param[{i}]");
+            let address = v.address.get_ref();
+            if !address.starts_with('/') || map.params.iter().any(|p| &p.address == address) {
+                let why = format!("{address:?} does not start with '/' or is used twice");
+                return Err(self.err(&v.address, &format!("{path}.address"), why));
+            }
+            let param = *v.param.get_ref();
+            if usize::from(param) >= MAX_PARAMS || map.params.iter().any(|p| p.param == param) {
+                let why = format!(
+                    "{param} is out of range (0 ..= {}) or used twice",
+                    MAX_PARAMS - 1
+                );
+                return Err(self.err(&v.param, &format!("{path}.param"), why));
+            }
+            let number = |f: &Option<S<f32>>, key: &str, default: f32| match f {
+                Some(x) if x.get_ref().is_finite() => Ok(*x.get_ref()),
+                Some(x) => Err(self.err(x, &format!("{path}.{key}"), "must be finite")),
+                None => Ok(default),
+            };
+            map.params.push(LiveParam {
+                address: address.clone(),
+                param,
+                scale: number(&v.scale, "scale", 1.0)?,
+                offset: number(&v.offset, "offset", 0.0)?,
+            });
+        }
+        map.params.sort_by_key(|p| p.param);
+        if let Some(k) = map
+            .params
+            .iter()
+            .enumerate()
+            .position(|(i, p)| usize::from(p.param) != i)
+        {
+            return Err(self.src.err(
+                &raw.span(),
+                "live.param",
+                format!(
+                    "the entries must cover params 0 ..= {} (Params overrides them in order): \
+                     param {k} is missing",
+                    map.params.len() - 1
+                ),
+            ));
+        }
+        Ok(map)
     }
 
     /// The named maps (`[[retarget.map]]`): unique, non-empty names.

@@ -306,7 +306,7 @@ fn render_refuses_bad_input() {
         "-o",
         s(&dir.path().join("p.png")),
     ]);
-    assert!(err.contains("too small"), "{err}");
+    assert!(err.contains("out of range"), "{err}");
 }
 
 #[test]

@@ -39,7 +39,22 @@ fn prints_the_contracted_json() {
     let keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
     let mut keys = keys;
     keys.sort_unstable();
-    assert_eq!(keys, ["converged", "goals", "iterations", "segments"]);
+    assert_eq!(
+        keys,
+        [
+            "converged",
+            "goals",
+            "iterations",
+            "met",
+            "restarts",
+            "segments",
+            "tolerance",
+            "unreachable"
+        ]
+    );
+    assert_eq!(v["restarts"], 3, "offline solve restarts by default");
+    assert_eq!(v["met"], 1);
+    assert_eq!(v["goals"][0]["met"], true);
     let g = &v["goals"][0];
     assert_eq!(g["segment"], "l_foot");
     assert!(g["distance"].as_f64().unwrap() < 1e-4);
@@ -55,6 +70,7 @@ fn prints_a_summary_without_json() {
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(text.starts_with("humanoid16: 1 goal(s)"), "{text}");
+    assert!(text.contains("1 of 1 goal(s) met"), "{text}");
     assert!(text.contains("l_foot"), "{text}");
 }
 
@@ -75,4 +91,13 @@ fn bad_input_exits_non_zero_naming_the_line_and_field() {
     assert!(!out.status.success());
     let err = String::from_utf8(out.stderr).unwrap();
     assert!(err.contains("goals.json:2:"), "{err}");
+}
+
+#[test]
+fn restarts_can_be_set() {
+    let goals = r#"{"goals": [{"segment": "l_foot", "target": [0.065, 0.0, 0.03], "weight": 1}]}"#;
+    let out = run(goals, &["--json", "--restarts", "0"]);
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["restarts"], 0);
 }

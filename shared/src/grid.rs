@@ -630,6 +630,26 @@ impl<'a> Grid<'a> {
 
     /// Locates `params` (one per axis) and computes the interpolation
     /// coefficients (see the module doc for the clamping/projection policy).
+    ///
+    /// # Example
+    ///
+    /// A grid over one axis, `a` from 0 to 2 in steps of 1 (three samples,
+    /// two cells): `a = 0.5` lies halfway through the first cell.
+    ///
+    /// ```
+    /// use marionette_core::grid::{Adjust, Axis, Grid};
+    ///
+    /// let grid = Grid::new(&[Axis::linear(0.0, 1.0, 3)], None).unwrap();
+    /// let q = grid.query(&[0.5]).unwrap();
+    /// // The samples it blends, and their weights.
+    /// assert_eq!(q.window().indices(), &[0, 1]);
+    /// assert_eq!(q.window().weights(), &[0.5, 0.5]);
+    /// assert_eq!(q.adjust(), Adjust::None);
+    /// // Outside the axis the parameter is clamped, and the query says so.
+    /// let q = grid.query(&[7.0]).unwrap();
+    /// assert_eq!(q.adjust(), Adjust::Clamped);
+    /// assert_eq!(q.params(), &[2.0]);
+    /// ```
     pub fn query(&self, params: &[f32]) -> Result<Query, GridError> {
         let mut q = Query::default();
         self.query_into(params, &mut q)?;
@@ -671,6 +691,30 @@ impl<'a> Grid<'a> {
     }
 
     /// Convenience: [`Grid::query`] then [`Query::pose`]; returns the adjustment.
+    ///
+    /// # Example
+    ///
+    /// Synthesizing a pose from a table in memory: one segment sampled at
+    /// `a = 0` (at the origin) and `a = 1` (2 m along X, turned 90° about
+    /// Y); `a = 0.25` blends them a quarter of the way.
+    ///
+    /// ```
+    /// use glam::{Quat, Vec3};
+    /// use marionette_core::grid::{Axis, Grid, SliceSamples};
+    /// use marionette_core::pose::Pose;
+    ///
+    /// let positions = [Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0)];
+    /// let rotations = [Quat::IDENTITY, Quat::from_rotation_y(core::f32::consts::FRAC_PI_2)];
+    /// let samples = SliceSamples::new(1, &positions, &rotations).unwrap();
+    /// let grid = Grid::new(&[Axis::linear(0.0, 1.0, 2)], None).unwrap();
+    ///
+    /// let mut pose = Pose::<4>::new(1).unwrap();
+    /// grid.synthesize(&samples, &[0.25], &mut pose).unwrap();
+    /// assert!(pose.positions[0].abs_diff_eq(Vec3::new(0.5, 0.0, 0.0), 1e-6));
+    /// // A quarter of the turn: 22.5° about Y.
+    /// let (axis, angle) = pose.rotations[0].to_axis_angle();
+    /// assert!(axis.abs_diff_eq(Vec3::Y, 1e-4) && (angle - 22.5f32.to_radians()).abs() < 1e-4);
+    /// ```
     pub fn synthesize<S: Samples, const N: usize>(
         &self,
         samples: &S,

@@ -11,6 +11,27 @@
 //! message -> sensor map -> params + goals -> synth (grid / clip) -> solve -> servo map
 //! ```
 //!
+//! ## Start here
+//!
+//! Each entry point carries a runnable example (run as doctests):
+//!
+//! - a grid query over a table's axes: [`grid::Grid::query`];
+//! - synthesizing a pose from samples in memory: [`grid::Grid::synthesize`]
+//!   (a flashed table: [`table::Table::parse`], then [`table::Table::grid`]);
+//! - solving weighted goals on a body: [`solve::solve`];
+//! - encoding a wire frame and receiving it on the board:
+//!   [`wire::encode`] and [`wire::Receiver`];
+//! - the board's loop on a few messages: [`perform::Performer`].
+//!
+//! ```
+//! use marionette_core::grid::{Axis, Grid};
+//!
+//! let grid = Grid::new(&[Axis::linear(-1.0, 0.5, 5)], None).unwrap();
+//! let q = grid.query(&[0.25]).unwrap();
+//! assert_eq!(q.window().indices(), &[2, 3]);
+//! assert_eq!(q.window().weights(), &[0.5, 0.5]);
+//! ```
+//!
 //! ## Determinism
 //!
 //! Host and firmware must produce bit-identical numbers. The core therefore never

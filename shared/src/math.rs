@@ -318,7 +318,7 @@ fn cos_poly(r: f32) -> f32 {
 /// `|x| ≤ 1e5`; beyond that the range reduction loses accuracy (still finite,
 /// never panics). NaN or infinite input gives NaN.
 ///
-/// Up to [`SIN_COS_DIRECT`] in magnitude (a joint's half angle, mostly) the
+/// Up to `SIN_COS_DIRECT` (π/4) in magnitude (a joint's half angle, mostly) the
 /// reduction is skipped: it would give `r = x` and quadrant 0 there, so the
 /// result is the same bit for bit (`sin_cos_fast_path_is_the_reduced_path`).
 #[inline]

@@ -154,6 +154,50 @@ impl Timing {
 
 /// The live loop of one board (see the module doc), for rigs of at most `N`
 /// segments.
+///
+/// # Example
+///
+/// A board whose table region is erased (no rig): it answers the host's
+/// `Hello` with why it cannot arm, refuses `Arm`, takes tracker frames
+/// without driving anything, and its ticks do nothing.
+///
+/// ```
+/// use marionette_core::frame::{NoCycles, Region};
+/// use marionette_core::perform::Performer;
+/// use marionette_core::solve::SolverState;
+/// use marionette_core::wire::{
+///     Command, CommandKind, Hello, List, MAX_FRAME, Message, PROTOCOL_VERSION, State,
+///     StatusReason, TrackerFrame, encode,
+/// };
+///
+/// let erased = [0xFF; 64];
+/// let region = Region::<24>::parse_sized(&erased);
+/// let mut solver = SolverState::<24>::new();
+/// let mut board = Performer::new(&region, &mut solver);
+/// let mut send = |board: &mut Performer<'_, '_, 24>, msg: Message, now_us: u32| {
+///     let mut buf = [0u8; MAX_FRAME];
+///     let mut bytes = encode(&msg, &mut buf).unwrap();
+///     board.receive(&mut bytes, now_us, &mut NoCycles)
+/// };
+///
+/// let hello = Message::Hello(Hello { protocol_version: PROTOCOL_VERSION });
+/// match send(&mut board, hello, 0).reply {
+///     Some(Message::Status(s)) => assert_eq!(s.reason, StatusReason::NoRig),
+///     other => panic!("{other:?}"),
+/// }
+/// let arm = Message::Command(Command { seq: 0, kind: CommandKind::Arm });
+/// match send(&mut board, arm, 10).reply {
+///     Some(Message::Ack(a)) => assert!(!a.ok),
+///     other => panic!("{other:?}"),
+/// }
+/// for seq in 1..=3 {
+///     let frame = TrackerFrame { seq, time_us: seq * 1000, sensors: List::new() };
+///     let update = send(&mut board, Message::TrackerFrame(frame), seq * 1000);
+///     assert_eq!(update.outputs, None);
+/// }
+/// assert_eq!(board.tick(10_000).outputs, None);
+/// assert_eq!((board.state(), board.armed(), board.targets().len()), (State::Unready, false, 0));
+/// ```
 pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
     pipeline: Option<Pipeline<'r, 'a, N>>,
     receiver: Receiver,

@@ -225,7 +225,13 @@ impl Progress {
 pub fn load(spec: &Spec, progress: &Progress) -> Result<Dataset, BuildError> {
     let start = Instant::now();
     let mut data = match &spec.input {
-        Input::Examples(path) => from_examples(&examples::read(path)?),
+        Input::Examples(path) => {
+            let mut data = from_examples(&examples::read(path)?);
+            if let Some(rig) = &spec.rig.file {
+                data.rig_hash = examples_rig_hash(spec, rig, path, &data.segments)?;
+            }
+            data
+        }
         Input::Mocap(m) => {
             progress.stage("importing mocap", m.clips.len());
             let mocap = mocap::load(spec, m, &|_| progress.tick())?;
@@ -234,6 +240,37 @@ pub fn load(spec: &Spec, progress: &Progress) -> Result<Dataset, BuildError> {
     };
     data.load_seconds = start.elapsed().as_secs_f64();
     Ok(data)
+}
+
+/// The hash of the spec's `[rig] file` for an example set, whose segments
+/// must be the rig's, in its order (the table is then built for that rig).
+fn examples_rig_hash(
+    spec: &Spec,
+    rig: &std::path::Path,
+    set: &std::path::Path,
+    segments: &[String],
+) -> Result<u64, BuildError> {
+    let file = crate::rigfile::load(rig).map_err(|e| {
+        spec.source
+            .error_line(spec.rig.line, "rig.file", e.to_string())
+    })?;
+    if file.segment_names() != segments {
+        let src = error::Source::read(set)?;
+        let line = crate::locate::line(&src.text, "segments");
+        return Err(src
+            .error_line(
+                line,
+                "segments",
+                format!(
+                    "the example set's segments ({}) are not the rig's ({}: {}), in order",
+                    segments.join(", "),
+                    rig.display(),
+                    file.segment_names().join(", ")
+                ),
+            )
+            .into());
+    }
+    Ok(file.rig_hash())
 }
 
 fn from_examples(set: &examples::ExampleSet) -> Dataset {

@@ -3,13 +3,15 @@
 //! optionally measure held-out error (`--holdout CLIP|all`).
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use serde_json::json;
 
 use super::CmdError;
+use crate::board::Board;
 use crate::build::{self, Built, Dataset, Progress, examples, measure, spec};
+use crate::capacity;
 
 /// Arguments of `marionette build`.
 #[derive(clap::Args, Debug)]
@@ -34,6 +36,68 @@ pub struct Args {
     /// Never draw a progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// The board the table is for: its table region must hold it (without
+    /// this, any board's).
+    #[arg(long, value_parser = ["emulated", "blackpill"])]
+    pub board: Option<String>,
+}
+
+/// Every file a spec reads: none of them may be overwritten.
+fn spec_inputs(spec: &spec::Spec, spec_path: &Path) -> Vec<(String, PathBuf)> {
+    let mut out = vec![("the build spec".to_owned(), spec_path.to_path_buf())];
+    match &spec.input {
+        spec::Input::Examples(p) => out.push(("the example set".into(), p.clone())),
+        spec::Input::Mocap(m) => {
+            if let Some(s) = &m.skeleton {
+                out.push(("the skeleton".into(), s.clone()));
+            }
+            for c in &m.clips {
+                out.push((format!("clip {}", c.name), c.file.clone()));
+            }
+        }
+    }
+    if let Some(r) = &spec.rig.file {
+        out.push(("the rig file".into(), r.clone()));
+    }
+    out
+}
+
+/// Writes `bytes` to `path` unless it is one of `inputs`.
+fn save(path: &Path, bytes: &[u8], inputs: &[(String, PathBuf)]) -> Result<(), CmdError> {
+    let inputs: Vec<(&str, &Path)> = inputs
+        .iter()
+        .map(|(w, p)| (w.as_str(), p.as_path()))
+        .collect();
+    Ok(crate::save::save(path, bytes, &inputs)?)
+}
+
+/// The table's size against each board (or the one asked for); an error if
+/// none (or not that one) can hold it.
+fn board_fit(
+    bytes: usize,
+    rig_blob: u64,
+    board: Option<&Board>,
+) -> Result<Vec<(Board, bool, u64)>, CmdError> {
+    let fits = capacity::fits(bytes as u64, rig_blob);
+    let ok = fits
+        .iter()
+        .any(|(b, fit, _)| *fit && board.is_none_or(|want| want.key == b.key));
+    if ok {
+        return Ok(fits);
+    }
+    let regions: Vec<String> = fits
+        .iter()
+        .map(|(b, _, _)| format!("{} {} B", b.key, b.table_region))
+        .collect();
+    Err(format!(
+        "the table is {bytes} B, more than {} ({}); nothing was written",
+        board.map_or("every board's table region".into(), |b| format!(
+            "{}'s table region",
+            b.key
+        )),
+        regions.join(", ")
+    )
+    .into())
 }
 
 /// Runs the build.
@@ -42,25 +106,45 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         return Err("nothing to do: give -o FILE, --holdout CLIP or --examples-out FILE".into());
     }
     let start = Instant::now();
+    let board = args.board.as_deref().and_then(Board::by_key);
     let spec = read_spec(&args.spec)?;
+    let inputs = spec_inputs(&spec, &args.spec);
+    for out in [&args.output, &args.examples_out].into_iter().flatten() {
+        let inputs: Vec<(&str, &Path)> = inputs
+            .iter()
+            .map(|(w, p)| (w.as_str(), p.as_path()))
+            .collect();
+        crate::save::check(out, &inputs)?;
+    }
+    if args.output.is_some() {
+        capacity::check_spec(&spec, board.as_ref())?;
+    }
     let progress = Progress::new(!args.quiet);
     let data = build::load(&spec, &progress)?;
+    if args.output.is_some() {
+        capacity::check_dataset(&spec, &data, board.as_ref())?;
+    }
     if let Some(path) = &args.examples_out {
-        write_examples(&data, path)?;
+        write_examples(&data, path, &inputs)?;
     }
     let mut report = serde_json::Map::new();
     if let Some(out) = &args.output {
         let built = build::build(&spec, &data, None, &progress)?;
-        std::fs::write(out, &built.blob).map_err(|source| build::BuildError::Write {
-            file: out.display().to_string(),
-            source,
-        })?;
+        let fits = board_fit(
+            built.blob.len(),
+            capacity::rig_blob_bytes(&spec),
+            board.as_ref(),
+        )?;
+        save(out, &built.blob, &inputs)?;
         progress.finish();
         let total = start.elapsed().as_secs_f64();
         if args.json {
-            report.insert("build".into(), build_json(&built, &data, out, total));
+            let mut doc = build_json(&built, &data, out, total);
+            doc["boards"] = fits_json(&fits);
+            report.insert("build".into(), doc);
         } else {
             print!("{}", build_text(&args.spec, out, &built, &data, total));
+            print!("{}", fits_text(&fits));
         }
     }
     if let Some(which) = &args.holdout {
@@ -134,7 +218,37 @@ fn holdout_groups(data: &Dataset, which: &str) -> Result<Vec<usize>, CmdError> {
     }
 }
 
-fn write_examples(data: &Dataset, path: &std::path::Path) -> Result<(), CmdError> {
+/// The table's fit per board, as text.
+fn fits_text(fits: &[(Board, bool, u64)]) -> String {
+    let mut s = String::from("  boards (table region: rig blob + table must fit):");
+    for (b, fit, used) in fits {
+        let _ = write!(
+            s,
+            " {} {} ({used} of {} B);",
+            b.key,
+            if *fit { "fits" } else { "does NOT fit" },
+            b.table_region
+        );
+    }
+    s.pop();
+    s.push('\n');
+    s
+}
+
+/// The table's fit per board, as JSON.
+fn fits_json(fits: &[(Board, bool, u64)]) -> serde_json::Value {
+    fits.iter()
+        .map(|(b, fit, used)| {
+            json!({ "board": b.key, "fits": fit, "table_bytes": used, "region_bytes": b.table_region })
+        })
+        .collect()
+}
+
+fn write_examples(
+    data: &Dataset,
+    path: &std::path::Path,
+    inputs: &[(String, PathBuf)],
+) -> Result<(), CmdError> {
     if data.layout != build::Layout::Grid {
         return Err("--examples-out: only grid builds have single-pose examples".into());
     }
@@ -151,11 +265,7 @@ fn write_examples(data: &Dataset, path: &std::path::Path) -> Result<(), CmdError
             .collect(),
     };
     let text = serde_json::to_string(&examples::to_json(&set))?;
-    std::fs::write(path, text).map_err(|source| build::BuildError::Write {
-        file: path.display().to_string(),
-        source,
-    })?;
-    Ok(())
+    save(path, text.as_bytes(), inputs)
 }
 
 fn mm(m: f64) -> String {

@@ -485,7 +485,9 @@ fn write_rig(path: &Path, servo: &ServoDesc, bus: bool, found: Found) -> Result<
     let edited = edit_rig(&text, servo.channel, bus, found)?;
     // The rig-file reader's word on the result, before it replaces the file.
     let _: RigFile = rigfile::parse(&edited, &path.display().to_string())?;
-    std::fs::write(path, edited).map_err(|e| format!("{}: {e}", path.display()).into())
+    // Replaced whole (a temporary file renamed), never half-written.
+    crate::save::save(path, edited.as_bytes(), &[])?;
+    Ok(())
 }
 
 /// The rig file's text with channel `channel`'s limits set (see the module

@@ -21,10 +21,13 @@
 //! (`time_us,ch0..ch15`, µs), `servo_emulated.png`, and `frame_<k>.png`.
 
 use super::CmdError;
+use super::emulate::{BOARD, Compared};
 use super::sim::{self, Inputs};
+use crate::board;
 use crate::build::{self, Built, Progress, spec};
 use crate::import::csv::read_tracker_csv;
 use crate::perform::{self, Pacing, Run};
+use crate::refusal;
 use crate::render::{self, Figure, Mark, PlotOptions, Series};
 use crate::rigfile;
 use glam::{DQuat, DVec3};
@@ -76,17 +79,21 @@ pub fn repo_path(p: &Path) -> PathBuf {
     }
 }
 
-/// Builds the table of a spec (no progress bar).
+/// Builds the table of a spec (no progress bar), checking first that the
+/// emulated board's table region can hold it.
 pub fn build_table(spec_path: &Path) -> Result<Built, CmdError> {
     let spec = spec::read(spec_path)?;
+    crate::capacity::check_spec(&spec, Some(&board::EMULATED))?;
     let progress = Progress::new(false);
     let data = build::load(&spec, &progress)?;
+    crate::capacity::check_dataset(&spec, &data, Some(&board::EMULATED))?;
     Ok(build::build(&spec, &data, None, &progress)?)
 }
 
 /// The region image and session of a rig file, a table blob and a recording.
 pub fn inputs(rig: &Path, table: &[u8], recording: &Path) -> Result<Inputs, CmdError> {
-    let rig = rigfile::load(&rigfile::resolve(rig))?;
+    let rig_path = rigfile::resolve(rig);
+    let rig = rigfile::load(&rig_path)?;
     let rig_blob = rigfile::to_blob(&rig)?;
     let samples = read_tracker_csv(recording)?;
     let frames = perform::frames(&samples)?;
@@ -96,6 +103,10 @@ pub fn inputs(rig: &Path, table: &[u8], recording: &Path) -> Result<Inputs, CmdE
         frames: frames.len(),
         times: frames.iter().map(|f| f.time_us).collect(),
         period_us: rig.desc().frame_period_us,
+        sources: vec![
+            ("the rig", rig_path),
+            ("the recording", recording.to_path_buf()),
+        ],
     })
 }
 
@@ -371,34 +382,44 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     let start = Instant::now();
     let (spec_path, rig_path) = (repo_path(&args.spec), repo_path(&args.rig));
     let recording = repo_path(&args.recording);
-    std::fs::create_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
     let built = build_table(&spec_path)?;
     let build_seconds = start.elapsed().as_secs_f64();
     let table_file = args.out.join("reach_humanoid16.bin");
-    std::fs::write(&table_file, &built.blob)
-        .map_err(|e| format!("{}: {e}", table_file.display()))?;
+    crate::save::save(
+        &table_file,
+        &built.blob,
+        &[("the spec", spec_path.as_path())],
+    )?;
     let inputs = inputs(&rig_path, &built.blob, &recording)?;
+    if let Some(stop) = refusal::precheck(BOARD, &inputs.region, &board::EMULATED) {
+        if args.json {
+            let doc = serde_json::json!({ "spec": spec_path.display().to_string(), "board": stop.report() });
+            println!("{}", serde_json::to_string_pretty(&doc)?);
+        }
+        return Err(Box::new(stop));
+    }
     let region = Region::parse(&inputs.region);
     let rig = region.rig.as_ref().ok_or("the rig blob is invalid")?;
-    if region.reason != StatusReason::Ok {
-        return Err(format!(
-            "the board would not arm with {} + {}: {:?}",
-            rig_path.display(),
-            spec_path.display(),
-            region.reason
-        )
-        .into());
-    }
     let tracker_frames = perform::frames(&read_tracker_csv(&recording)?)?;
     let sample = sample_frames(inputs.frames, args.frames);
     let native = native(&inputs, &sample)?;
-    let (board, emulated, _) =
-        super::emulate::compare(&inputs, &args.out, Pacing::AsFastAsPossible)?;
-    let servo_csv = PathBuf::from(&emulated.servo_csv);
+    let Compared {
+        run: board,
+        summary: emulated,
+        stop,
+        ..
+    } = super::emulate::compare(&inputs, &args.out, Pacing::AsFastAsPossible)?;
+    if let Some(stop) = stop {
+        if args.json {
+            println!("{}", serde_json::to_string_pretty(&emulated)?);
+        }
+        return Err(Box::new(stop));
+    }
+    let servo_csv = PathBuf::from(emulated.servo_csv.clone().unwrap_or_default());
     let mut files = vec![
         table_file.display().to_string(),
         args.out.join("region.bin").display().to_string(),
-        emulated.servo_csv.clone(),
+        servo_csv.display().to_string(),
         plot_servos(&servo_csv)?.display().to_string(),
     ];
     for f in draw_frames(rig, &tracker_frames, &native.poses, &args.out)? {

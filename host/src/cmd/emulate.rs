@@ -5,12 +5,18 @@
 //! commands that come back on UART1, and checks the targets of every tracker
 //! frame against the core run natively on the same session
 //! (`marionette sim`): they must be bit-identical.
+//!
+//! A board that refuses to arm, or stops on a fault, is reported with its
+//! `Status` reason and what to do, and the command exits 3 or 4 (see
+//! [`crate::refusal`]); `--json` carries the same in its `board` object.
 
 use super::CmdError;
 use super::sim::{self, Inputs};
-use crate::perform::{self, Pacing};
+use crate::perform::{self, Pacing, PerformError};
+use crate::qemu::QemuError;
+use crate::refusal::{self, BoardReport, Stop};
 use serde::Serialize;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Arguments of `marionette emulate`.
@@ -63,34 +69,75 @@ pub struct Summary {
     pub replies: usize,
     /// Per-channel [min, max] target, µs.
     pub ranges_us: Vec<[f64; 2]>,
-    /// The servo CSV written.
-    pub servo_csv: String,
+    /// The servo CSV written (`null` when the board did not perform).
+    pub servo_csv: Option<String>,
     /// Wall-clock seconds, including boot.
     pub seconds: f64,
+    /// Whether the board armed, and if not why (see [`crate::refusal`]).
+    pub board: BoardReport,
+}
+
+/// What [`compare`] found.
+pub struct Compared {
+    /// The board's run.
+    pub run: perform::Run,
+    /// The summary.
+    pub summary: Summary,
+    /// The raw servo-bus bytes.
+    pub raw: Vec<u8>,
+    /// Why the board did not perform, if it did not.
+    pub stop: Option<Stop>,
+}
+
+/// The board's name in messages.
+pub const BOARD: &str = "the emulated board";
+
+/// A harness error that is really the board's fault (it ran past its
+/// deadline), as a [`Stop`].
+fn as_stop(e: PerformError) -> CmdError {
+    match e {
+        PerformError::Qemu(QemuError::Timeout(d)) => Box::new(Stop::fault(
+            BOARD,
+            format!("it did not finish within {d:?}; QEMU was killed"),
+        )),
+        other => Box::new(other),
+    }
 }
 
 /// Runs the session on the emulated board and natively, and compares them.
-pub fn compare(
-    inputs: &Inputs,
-    out: &std::path::Path,
-    pacing: Pacing,
-) -> Result<(perform::Run, Summary, Vec<u8>), CmdError> {
+/// Writes `region.bin` and, if the board performed, `servo_emulated.csv`
+/// into `out`.
+pub fn compare(inputs: &Inputs, out: &Path, pacing: Pacing) -> Result<Compared, CmdError> {
     let start = Instant::now();
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let region_file = out.join("region.bin");
-    std::fs::write(&region_file, &inputs.region)
-        .map_err(|e| format!("{}: {e}", region_file.display()))?;
+    let sources = inputs.source_list();
+    let region_file = sim::out_file(out, "region.bin")?;
+    crate::save::check(&region_file, &sources)?;
+    // The board boots from a staged copy, kept as `region.bin` only if it
+    // performed: a failed run leaves nothing behind.
+    let staged = crate::save::temp_beside(&region_file)?;
+    std::fs::write(staged.path(), &inputs.region)
+        .map_err(|e| format!("{}: {e}", staged.path().display()))?;
     let native = perform::simulate(&inputs.region, &inputs.session)?;
     let channels = native.frame_targets.first().map_or(1, Vec::len);
     let expected = native.frame_targets.len();
     let (board, raw) = perform::emulate(
-        &region_file,
+        staged.path(),
         &inputs.session,
         channels,
         expected,
         pacing,
         std::time::Duration::ZERO,
-    )?;
+    )
+    .map_err(as_stop)?;
+    let stop = match &board.fault {
+        Some(what) => Some(Stop::fault(BOARD, what.clone())),
+        None => refusal::check(
+            BOARD,
+            &board.replies,
+            &inputs.region,
+            Some(&crate::board::EMULATED),
+        ),
+    };
     // Every output the board sent, in order (the split above is by count).
     let sent: Vec<Vec<u16>> = board
         .frame_targets
@@ -98,21 +145,35 @@ pub fn compare(
         .chain(&board.rest_targets)
         .cloned()
         .collect();
-    let followed = perform::follow(&inputs.region, &inputs.session, &sent, &board.replies)?;
-    let csv = out.join("servo_emulated.csv");
-    sim::write_servo_csv(&csv, inputs, &board)?;
+    let (followed, csv) = if stop.is_none() {
+        let followed = perform::follow(&inputs.region, &inputs.session, &sent, &board.replies)?;
+        let csv = out.join("servo_emulated.csv");
+        sim::write_servo_csv(&csv, inputs, &board)?;
+        crate::save::commit(staged, &region_file)?;
+        (Some(followed), Some(csv.display().to_string()))
+    } else {
+        (None, None)
+    };
     let summary = Summary {
         frames: inputs.frames,
         frame_outputs: board.frame_targets.len(),
-        mismatches: followed.mismatches,
-        failsafe_trips: followed.trips.len(),
-        rest_steps: sent.len().saturating_sub(followed.compared),
+        mismatches: followed.as_ref().map_or(0, |f| f.mismatches),
+        failsafe_trips: followed.as_ref().map_or(0, |f| f.trips.len()),
+        rest_steps: sent
+            .len()
+            .saturating_sub(followed.as_ref().map_or(0, |f| f.compared)),
         replies: board.replies.len(),
         ranges_us: sim::ranges(&board),
-        servo_csv: csv.display().to_string(),
+        servo_csv: csv,
         seconds: start.elapsed().as_secs_f64(),
+        board: stop.as_ref().map_or_else(BoardReport::armed, Stop::report),
     };
-    Ok((board, summary, raw))
+    Ok(Compared {
+        run: board,
+        summary,
+        raw,
+        stop,
+    })
 }
 
 /// Runs the performance and prints its summary.
@@ -128,13 +189,18 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     } else {
         Pacing::AsFastAsPossible
     };
-    let (_, summary, raw) = compare(&inputs, &args.out, pacing)?;
     if let Some(path) = &args.raw_servo {
-        std::fs::write(path, raw).map_err(|e| format!("{}: {e}", path.display()))?;
+        crate::save::check(path, &inputs.source_list())?;
+    }
+    let Compared {
+        summary, raw, stop, ..
+    } = compare(&inputs, &args.out, pacing)?;
+    if let (Some(path), None) = (&args.raw_servo, &stop) {
+        crate::save::save(path, &raw, &inputs.source_list())?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
-    } else {
+    } else if stop.is_none() {
         println!(
             "emulated board: {} tracker frames in, {} servo frames out, {} differ from the native core, \
              {} fail-safe trips followed, {} steps to rest, {} replies; servo curves in {} ({:.1} s)",
@@ -144,9 +210,12 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
             summary.failsafe_trips,
             summary.rest_steps,
             summary.replies,
-            summary.servo_csv,
+            summary.servo_csv.as_deref().unwrap_or("-"),
             summary.seconds
         );
+    }
+    if let Some(stop) = stop {
+        return Err(Box::new(stop));
     }
     if summary.mismatches > 0 {
         return Err("the emulated board's servo output differs from the native core".into());

@@ -35,6 +35,7 @@ pub struct Args {
 
 /// Reads the CSV, draws it and says where.
 pub fn run(args: &Args) -> Result<(), CmdError> {
+    crate::save::check(&args.output, &[("the CSV", args.csv.as_path())])?;
     let text =
         std::fs::read_to_string(&args.csv).map_err(|e| format!("{}: {e}", args.csv.display()))?;
     let mut series =

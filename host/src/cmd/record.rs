@@ -27,11 +27,11 @@
 //! BVH, CMU names: `RightHand`, `LeftHand`, `Hips`).
 
 use super::CmdError;
-use crate::import::csv::{HEADER, TrackerSample};
+use crate::import::csv::{self, HEADER, TrackerSample};
 use crate::import::{self, Motion};
 use crate::perform::Framing;
 use glam::{DQuat, DVec3};
-use marionette_core::wire::{Sensor, compact};
+use marionette_core::wire::{MAX_SENSORS, Sensor, compact};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `marionette record`.
@@ -177,6 +177,59 @@ pub fn write_csv<W: std::io::Write>(mut out: W, samples: &[TrackerSample]) -> st
     out.flush()
 }
 
+/// The highest tracker rate, Hz: ten times the fastest rig loop (1 kHz).
+/// Even that is beyond what a tracker link carries (921,600 baud takes
+/// about 912 three-sensor frames a second).
+pub const MAX_RATE_HZ: f64 = 10_000.0;
+
+/// Checks a recording's shape before it is computed: the rate, the sensor
+/// ids (unique, and below the 16 a tracker frame carries), the number of
+/// samples ([`csv::MAX_SAMPLES`]) and the time stamps (within the wire
+/// clock's [`csv::MAX_SPAN_US`], no overflow from `start_us`).
+pub fn check(
+    trackers: &[Tracker],
+    rate_hz: f64,
+    start_us: u64,
+    duration_s: f64,
+) -> Result<(), String> {
+    if !(rate_hz.is_finite() && rate_hz > 0.0 && rate_hz <= MAX_RATE_HZ) {
+        return Err(format!(
+            "--rate-hz {rate_hz}: expected 0 < rate <= {MAX_RATE_HZ} Hz"
+        ));
+    }
+    for (i, t) in trackers.iter().enumerate() {
+        if usize::from(t.sensor) >= MAX_SENSORS {
+            return Err(format!(
+                "--sensor {}: a tracker frame carries sensor ids 0..{MAX_SENSORS}",
+                t.sensor
+            ));
+        }
+        if trackers[..i].iter().any(|u| u.sensor == t.sensor) {
+            return Err(format!("--sensor {}: the id is given twice", t.sensor));
+        }
+    }
+    let steps = (duration_s * rate_hz).floor() + 1.0;
+    let rows = steps * trackers.len() as f64;
+    if rows > csv::MAX_SAMPLES as f64 {
+        return Err(format!(
+            "{} s at {rate_hz} Hz for {} sensors is {rows} samples; a recording holds at most {} \
+             (lower --rate-hz, or record part of the clip)",
+            duration_s,
+            trackers.len(),
+            csv::MAX_SAMPLES
+        ));
+    }
+    let span = (duration_s * 1e6).round();
+    if span > csv::MAX_SPAN_US as f64 || start_us.checked_add(span as u64).is_none() {
+        return Err(format!(
+            "--start-us {start_us} + {duration_s:.3} s: the time stamps must fit 64 bits and span at \
+             most {} µs (the wire's clock)",
+            csv::MAX_SPAN_US
+        ));
+    }
+    Ok(())
+}
+
 /// Each sample as the compact tracker frame carries it (a position outside
 /// its ±4 m is kept as is: such a frame travels as `f32`).
 #[must_use]
@@ -211,6 +264,15 @@ pub fn write_csv_exact<W: std::io::Write>(
     samples: &[TrackerSample],
 ) -> std::io::Result<()> {
     writeln!(out, "{}", HEADER.join(","))?;
+    write_rows_exact(out, samples)
+}
+
+/// [`write_csv_exact`] without the header line: rows to append to a
+/// recording being written as it goes.
+pub fn write_rows_exact<W: std::io::Write>(
+    mut out: W,
+    samples: &[TrackerSample],
+) -> std::io::Result<()> {
     for s in samples {
         let (p, q) = (s.position, s.orientation);
         let exact = |x: f64| f64::from(x as f32).to_string();
@@ -229,16 +291,16 @@ pub fn write_csv_exact<W: std::io::Write>(
 }
 
 /// The tracker samples of a clip, resampled to `rate_hz` from `start_us`
-/// (see the module doc), in time order, sensors in the given order.
+/// (see the module doc), in time order, sensors in the given order. The
+/// shape is [`check`]ed first.
 pub fn record(
     motion: &Motion,
     trackers: &[Tracker],
     rate_hz: f64,
     start_us: u64,
 ) -> Result<Vec<TrackerSample>, String> {
-    if !(rate_hz.is_finite() && rate_hz > 0.0 && rate_hz <= 1e6) {
-        return Err(format!("--rate-hz {rate_hz}: expected 0 < rate <= 1e6"));
-    }
+    let duration = motion.frames.len().saturating_sub(1) as f64 * motion.frame_time;
+    check(trackers, rate_hz, start_us, duration)?;
     let indices = trackers
         .iter()
         .map(|t| {
@@ -267,7 +329,6 @@ pub fn record(
         return Err(format!("{}: no frames", motion.source));
     }
     let worlds: Vec<Vec<(DVec3, DQuat)>> = (0..n).map(|f| world(motion, f)).collect();
-    let duration = (n - 1) as f64 * motion.frame_time;
     let steps = (duration * rate_hz + 1e-9).floor() as u64 + 1;
     let mut last: Vec<DQuat> = vec![DQuat::IDENTITY; trackers.len()];
     let mut out = Vec::with_capacity(steps as usize * trackers.len());
@@ -340,18 +401,21 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
             .map(|s| Tracker::parse(s))
             .collect::<Result<Vec<_>, _>>()?
     };
+    let mut inputs = vec![("the clip", args.clip.as_path())];
+    if let Some(asf) = &args.skeleton {
+        inputs.push(("the skeleton", asf.as_path()));
+    }
+    crate::save::check(&args.output, &inputs)?;
     let samples = record(&motion, &trackers, args.rate_hz, args.start_us)?;
-    if let Some(dir) = args.output.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    }
-    let file = std::fs::File::create(&args.output)
-        .map_err(|e| format!("{}: {e}", args.output.display()))?;
-    let out = std::io::BufWriter::new(file);
+    let mut text = Vec::new();
     match args.frame {
-        Framing::Compact => write_csv_exact(out, &snap_compact(&samples)),
-        Framing::F32 => write_csv(out, &samples),
-    }
-    .map_err(|e| format!("{}: {e}", args.output.display()))?;
+        Framing::Compact => write_csv_exact(&mut text, &snap_compact(&samples)),
+        Framing::F32 => write_csv(&mut text, &samples),
+    }?;
+    // The recording is what the reader accepts, or it is not written.
+    csv::parse_tracker_csv(text.as_slice(), &args.output.display().to_string())
+        .map_err(|e| format!("refusing to write an invalid recording: {e}"))?;
+    crate::save::save(&args.output, &text, &inputs)?;
     let frames = samples.len() / trackers.len().max(1);
     println!(
         "{}: {} sensors x {} samples at {} Hz ({:.3} s) from {} ({} frames)",

@@ -340,6 +340,15 @@ fn figure_of(
 
 /// Draws the figure and says where.
 pub fn run(args: &Args) -> Result<(), CmdError> {
+    let inputs: Vec<(&str, &Path)> = [
+        ("the rig", args.rig.as_deref()),
+        ("the pose", args.pose.as_deref()),
+        ("the goals", args.goals.as_deref()),
+    ]
+    .into_iter()
+    .filter_map(|(what, p)| Some((what, p?)))
+    .collect();
+    crate::save::check(&args.output, &inputs)?;
     let fig = figure(args)?;
     let opt = RenderOptions {
         width: args.width,

@@ -8,7 +8,8 @@
 
 use super::CmdError;
 use crate::perform::{self, Framing, Run};
-use crate::{import, rigfile};
+use crate::refusal::{self, BoardReport, Stop};
+use crate::{board, import, rigfile};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -24,7 +25,7 @@ pub struct Args {
     /// The tracker recording (CSV).
     #[arg(long)]
     pub recording: PathBuf,
-    /// Where to write `servo.csv`.
+    /// The folder to write `servo_sim.csv` into (created if missing).
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
     /// How tracker frames travel: the compact frame (quantized) or `f32`.
@@ -48,8 +49,13 @@ pub struct Summary {
     pub channels: usize,
     /// Lowest and highest target per channel, µs.
     pub ranges_us: Vec<[f64; 2]>,
-    /// The servo CSV written.
-    pub servo_csv: String,
+    /// The servo CSV written (`null` when the loop did not arm).
+    pub servo_csv: Option<String>,
+    /// Whether the loop armed, and if not why (see [`crate::refusal`]).
+    pub board: BoardReport,
+    /// Boards that would refuse this rig, with why (the native loop does
+    /// not model a board's back-ends or capacity).
+    pub boards_refusing: Vec<String>,
 }
 
 /// The inputs of a performance, loaded.
@@ -64,6 +70,19 @@ pub struct Inputs {
     pub times: Vec<u32>,
     /// The rig's frame period, µs.
     pub period_us: u32,
+    /// The files these came from (`(what, path)`): outputs never replace them.
+    pub sources: Vec<(&'static str, PathBuf)>,
+}
+
+impl Inputs {
+    /// [`Inputs::sources`] as [`crate::save`] takes them.
+    #[must_use]
+    pub fn source_list(&self) -> Vec<(&str, &Path)> {
+        self.sources
+            .iter()
+            .map(|(w, p)| (*w, p.as_path()))
+            .collect()
+    }
 }
 
 /// Loads the rig, tables and recording into a region image and a session
@@ -79,8 +98,14 @@ pub fn load_with(
     recording: &Path,
     framing: Framing,
 ) -> Result<Inputs, CmdError> {
-    let rig = rigfile::load(&rigfile::resolve(rig))?;
+    let rig_path = rigfile::resolve(rig);
+    let rig = rigfile::load(&rig_path)?;
     let rig_blob = rigfile::to_blob(&rig)?;
+    let mut sources = vec![
+        ("the rig", rig_path),
+        ("the recording", recording.to_path_buf()),
+    ];
+    sources.extend(tables.map(|t| ("the table", t.to_path_buf())));
     let table_blob = match tables {
         Some(t) => Some(std::fs::read(t).map_err(|e| format!("{}: {e}", t.display()))?),
         None => None,
@@ -93,14 +118,12 @@ pub fn load_with(
         frames: frames.len(),
         times: frames.iter().map(|f| f.time_us).collect(),
         period_us: rig.desc().frame_period_us,
+        sources,
     })
 }
 
 /// Writes a run's targets as `time_us,ch0,…` (µs) to `path`.
 pub fn write_servo_csv(path: &Path, inputs: &Inputs, run: &Run) -> Result<(), CmdError> {
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    }
     let channels = run.frame_targets.first().map_or(0, Vec::len);
     let mut text = String::from("time_us");
     for c in 0..channels {
@@ -117,7 +140,11 @@ pub fn write_servo_csv(path: &Path, inputs: &Inputs, run: &Run) -> Result<(), Cm
         }
         text.push('\n');
     }
-    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()).into())
+    Ok(crate::save::save(
+        path,
+        text.as_bytes(),
+        &inputs.source_list(),
+    )?)
 }
 
 /// Per-channel [min, max] of the targets, µs.
@@ -139,8 +166,36 @@ pub fn ranges(run: &Run) -> Vec<[f64; 2]> {
         .collect()
 }
 
+/// The name of the native loop in messages.
+pub const NATIVE: &str = "the live loop (run natively)";
+
+/// Boards that would refuse the region's rig (segments, back-end, region
+/// size), each with why: the native loop does not model a board.
+#[must_use]
+pub fn boards_refusing(region: &[u8]) -> Vec<String> {
+    board::BOARDS
+        .iter()
+        .filter_map(|b| refusal::region_verdict(b, region))
+        .filter(|v| !v.fits)
+        .map(|v| format!("{}: {}", v.board, v.problems.join("; ")))
+        .collect()
+}
+
+/// Where `--out` puts `name`: `out` must be a folder (created if missing).
+pub fn out_file(out: &Path, name: &str) -> Result<PathBuf, CmdError> {
+    if out.is_file() {
+        return Err(format!(
+            "--out {}: is a file; give the folder to write {name} into",
+            out.display()
+        )
+        .into());
+    }
+    Ok(out.join(name))
+}
+
 /// Runs the session natively and writes the servo curves.
 pub fn run(args: &Args) -> Result<(), CmdError> {
+    let csv = out_file(&args.out, "servo_sim.csv")?;
     let inputs = load_with(
         &args.rig,
         args.tables.as_deref(),
@@ -148,27 +203,37 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         args.frame,
     )?;
     let run = perform::simulate(&inputs.region, &inputs.session)?;
-    let csv = args.out.join("servo_sim.csv");
-    write_servo_csv(&csv, &inputs, &run)?;
+    let stop = refusal::check(NATIVE, &run.replies, &inputs.region, None);
+    if stop.is_none() {
+        write_servo_csv(&csv, &inputs, &run)?;
+    }
     let summary = Summary {
         frames: inputs.frames,
         frame_outputs: run.frame_targets.len(),
         rest_steps: run.rest_targets.len(),
         channels: run.frame_targets.first().map_or(0, Vec::len),
         ranges_us: ranges(&run),
-        servo_csv: csv.display().to_string(),
+        servo_csv: stop.is_none().then(|| csv.display().to_string()),
+        board: stop.as_ref().map_or_else(BoardReport::armed, Stop::report),
+        boards_refusing: boards_refusing(&inputs.region),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
-    } else {
+    } else if stop.is_none() {
         println!(
             "sim: {} frames, {} output frames, {} steps to rest, {} channels; servo curves in {}",
             summary.frames,
             summary.frame_outputs,
             summary.rest_steps,
             summary.channels,
-            summary.servo_csv
+            csv.display()
         );
+        for why in &summary.boards_refusing {
+            eprintln!("note: a board would refuse this rig: {why}");
+        }
     }
-    Ok(())
+    match stop {
+        Some(stop) => Err(Box::new(stop)),
+        None => Ok(()),
+    }
 }

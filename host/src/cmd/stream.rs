@@ -1,21 +1,41 @@
-//! `marionette stream --port DEV`: a performance on a real board.
+//! `marionette stream --port DEV`: a performance on a real board, in real
+//! time.
 //!
-//! Streams a tracker recording to a board over a serial port (the same
-//! session as `marionette emulate` and `sim`: `Hello`, `Arm`, the frames,
-//! `Disarm`), in real time by default, and records what the board answers:
-//! its `Status`, the `Ack`s and the `Telemetry` (servo targets, goal
-//! residuals, per-stage cycle counts, error counters). The servo bus itself
-//! is on the board; the telemetry's servo targets are written as CSV.
+//! Streams a tracker recording to a board over a serial port (the session of
+//! `marionette emulate` and `sim`: `Hello`, `Arm`, the frames, `Disarm`)
+//! through the real-time [`Sender`]: each frame is offered at its recorded
+//! time, and one that cannot go out before the next is due is dropped and
+//! counted, never queued behind (newest wins). A slow or stalled link drops
+//! frames; it never aborts the performance.
+//!
+//! It first says `Hello` until the board answers (QEMU's pseudo-terminals
+//! notice a new reader only once a second), and stops with the board's
+//! reason and what to do if the board cannot arm. At the end it writes:
+//!
+//! - `sent.csv`: the frames actually sent, as a tracker recording (every
+//!   value exact): `marionette sim` on it reproduces the board's servo
+//!   output bit for bit (given the board's fail-safe trips, which its
+//!   telemetry reports);
+//! - `telemetry.csv`: the servo targets the board reported.
+//!
+//! It prints frames sent and dropped, the link's use against its capacity,
+//! and what the board said about itself: its state, fail-safe trips, and
+//! frame timing (mean, worst, overruns of the frame period) in its counter
+//! units (see README, "Reading the board's timing").
 
 use super::CmdError;
-use crate::perform::{self, Pacing};
+use crate::import::csv::TrackerSample;
+use crate::link::Link;
+use crate::perform::{self, Framing};
+use crate::sender::{Counts, Sender};
 use crate::{import, rigfile};
-use marionette_core::wire::Message;
+use marionette_core::wire::{CommandKind, FrameTiming, Message, State, StatusReason, TrackerFrame};
 use serde::Serialize;
-use std::io::{Read, Write};
-use std::path::PathBuf;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// Arguments of `marionette stream`.
 #[derive(clap::Args, Debug)]
@@ -23,7 +43,8 @@ pub struct Args {
     /// The board's tracker serial port, e.g. /dev/ttyUSB0.
     #[arg(long)]
     pub port: String,
-    /// Baud rate of the tracker link (the Black Pill's USART1 runs at 921 600).
+    /// Baud rate of the tracker link (the Black Pill's USART1 runs at
+    /// 921 600); the sender never writes faster than it.
     #[arg(long, default_value_t = 921_600)]
     pub baud: u32,
     /// The tracker recording (CSV).
@@ -32,10 +53,14 @@ pub struct Args {
     /// The rig file (for its frame period; the rig itself is in the board's flash).
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
-    /// Send as fast as the port takes it instead of in real time.
+    /// Send every frame as soon as the link takes it (nothing dropped, not
+    /// in real time) instead of at its recorded time.
     #[arg(long)]
     pub fast: bool,
-    /// Where to write `telemetry.csv`.
+    /// How tracker frames travel: the compact frame (quantized) or `f32`.
+    #[arg(long, value_enum, default_value_t = Framing::Compact)]
+    pub frame: Framing,
+    /// Where to write `telemetry.csv` and `sent.csv`.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
     /// Print the summary as JSON.
@@ -43,14 +68,22 @@ pub struct Args {
     pub json: bool,
 }
 
-/// What the board answered.
+/// What a stream did, and what the board answered.
 #[derive(Debug, Default, Serialize)]
 pub struct Summary {
-    /// Tracker frames sent.
+    /// Tracker frames in the recording.
     pub frames: usize,
+    /// What the sender did: frames offered, sent, dropped; bytes written.
+    pub sender: Counts,
+    /// Seconds from the first frame to the last one sent.
+    pub seconds: f64,
+    /// Bytes a second written, on average.
+    pub link_bytes_per_s: f64,
+    /// The link's capacity, bytes a second (8N1).
+    pub link_capacity_bytes_per_s: f64,
     /// Status messages received.
     pub statuses: usize,
-    /// Acks received, and how many said no.
+    /// Acks received.
     pub acks: usize,
     /// Acks that refused their command.
     pub refused: usize,
@@ -58,27 +91,31 @@ pub struct Summary {
     pub telemetry: usize,
     /// The board's last error counters' total.
     pub errors: u32,
+    /// The board's last reported state.
+    pub state: Option<State>,
+    /// Fail-safe trips the board reported.
+    pub trips: u32,
+    /// The board's last reported frame timing (its counter units).
+    pub timing: Option<FrameTiming>,
+    /// Whether the board acknowledged the closing `Disarm` (its replies
+    /// to every frame before it then arrived).
+    pub disarm_acked: bool,
     /// The telemetry CSV written.
     pub telemetry_csv: String,
+    /// The recording of the frames sent.
+    pub sent_csv: String,
 }
 
-/// Tallies the board's replies and writes the telemetry's servo targets.
-pub fn summarize(
-    replies: &[Message],
-    frames: usize,
-    csv: &std::path::Path,
-) -> Result<Summary, CmdError> {
-    let mut s = Summary {
-        frames,
-        telemetry_csv: csv.display().to_string(),
-        ..Summary::default()
-    };
+/// Tallies the board's replies into `s` and writes the telemetry's servo
+/// targets to `csv`.
+pub fn summarize(replies: &[Message], s: &mut Summary, csv: &Path) -> Result<(), CmdError> {
     let mut text = String::from("seq,targets_us\n");
     for m in replies {
         match m {
             Message::Status(st) => {
                 s.statuses += 1;
                 s.errors = st.errors.total();
+                s.state = Some(st.state);
             }
             Message::Ack(a) => {
                 s.acks += 1;
@@ -87,6 +124,9 @@ pub fn summarize(
             Message::Telemetry(t) => {
                 s.telemetry += 1;
                 s.errors = t.errors.total();
+                s.state = Some(t.state);
+                s.trips = t.trips;
+                s.timing = Some(t.timing);
                 let us: Vec<String> = t
                     .servo_targets
                     .iter()
@@ -97,73 +137,302 @@ pub fn summarize(
             _ => {}
         }
     }
-    if let Some(dir) = csv.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    }
-    std::fs::write(csv, text).map_err(|e| format!("{}: {e}", csv.display()))?;
-    Ok(s)
+    s.telemetry_csv = csv.display().to_string();
+    crate::save::save(csv, text.as_bytes(), &[])?;
+    Ok(())
 }
 
-/// Streams the recording to the board and reports what it answered.
-pub fn run(args: &Args) -> Result<(), CmdError> {
-    let _rig = rigfile::load(&rigfile::resolve(&args.rig))?;
-    let samples = import::csv::read_tracker_csv(&args.recording)?;
-    let frames = perform::frames(&samples)?;
-    let session = perform::session(&frames)?;
-    let mut port = serialport::new(&args.port, args.baud)
-        .timeout(Duration::from_millis(50))
-        .open()
-        .map_err(|e| format!("{}: {e}", args.port))?;
-    let mut reader = port
-        .try_clone()
-        .map_err(|e| format!("{}: {e}", args.port))?;
-    let received = Arc::new(Mutex::new(Vec::new()));
-    let sink = Arc::clone(&received);
-    let done = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let stop = Arc::clone(&done);
-    let listener = std::thread::spawn(move || {
-        let mut buf = [0u8; 1024];
-        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-            match reader.read(&mut buf) {
-                Ok(n) if n > 0 => {
-                    if let (Ok(mut v), Some(chunk)) = (sink.lock(), buf.get(..n)) {
-                        v.extend_from_slice(chunk);
+/// Bytes from the board, collected by a background thread.
+pub struct Replies {
+    bytes: Arc<Mutex<Vec<u8>>>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Replies {
+    /// Starts reading `port` (which has a read timeout).
+    pub fn spawn(mut port: impl Read + Send + 'static) -> Self {
+        let bytes = Arc::new(Mutex::new(Vec::new()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (sink, halt) = (Arc::clone(&bytes), Arc::clone(&stop));
+        let thread = std::thread::spawn(move || {
+            let mut buf = [0u8; 1024];
+            while !halt.load(Ordering::Relaxed) {
+                match port.read(&mut buf) {
+                    Ok(n) if n > 0 => {
+                        if let (Ok(mut v), Some(chunk)) = (sink.lock(), buf.get(..n)) {
+                            v.extend_from_slice(chunk);
+                        }
                     }
+                    Ok(_) => std::thread::sleep(Duration::from_millis(1)),
+                    Err(_) => std::thread::sleep(Duration::from_millis(1)),
                 }
-                _ => {}
             }
+        });
+        Self {
+            bytes,
+            stop,
+            thread: Some(thread),
         }
-    });
-    let pacing = if args.fast {
-        Pacing::AsFastAsPossible
-    } else {
-        Pacing::RealTime
+    }
+
+    /// The messages received so far.
+    #[must_use]
+    pub fn messages(&self) -> Vec<Message> {
+        let bytes = self.bytes.lock().map(|v| v.clone()).unwrap_or_default();
+        perform::decode_replies(&bytes)
+    }
+
+    /// Waits up to `limit` for a reply `pick` accepts.
+    pub fn wait_for<T>(&self, limit: Duration, pick: impl Fn(&Message) -> Option<T>) -> Option<T> {
+        let deadline = Instant::now() + limit;
+        loop {
+            if let Some(found) = self.messages().iter().find_map(&pick) {
+                return Some(found);
+            }
+            if Instant::now() > deadline {
+                return None;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// Stops reading and returns every message received.
+    pub fn finish(mut self) -> Vec<Message> {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        self.messages()
+    }
+}
+
+/// Says `Hello` until the board answers with a `Status` (once a second, up
+/// to `limit`); errors if it never does or cannot arm.
+pub fn handshake(
+    sender: &Sender,
+    replies: &Replies,
+    port: &str,
+    limit: Duration,
+) -> Result<(), CmdError> {
+    let deadline = Instant::now() + limit;
+    let status = loop {
+        sender.hello();
+        let got = replies.wait_for(Duration::from_secs(1), |m| match m {
+            Message::Status(st) if st.request_seq.is_none() => Some(*st),
+            _ => None,
+        });
+        if let Some(st) = got {
+            break st;
+        }
+        if Instant::now() > deadline {
+            return Err(format!(
+                "{port}: no answer from the board in {limit:?}: check the port, the baud rate, \
+                 and that the board runs Marionette's firmware"
+            )
+            .into());
+        }
     };
-    let sent = perform::pace(&session, pacing, |bytes| port.write_all(bytes));
-    std::thread::sleep(Duration::from_millis(300));
-    done.store(true, std::sync::atomic::Ordering::Relaxed);
-    let _ = listener.join();
-    sent.map_err(|e| format!("{}: {e}", args.port))?;
-    let bytes = received.lock().map(|v| v.clone()).unwrap_or_default();
-    let summary = summarize(
-        &perform::decode_replies(&bytes),
-        frames.len(),
-        &args.out.join("telemetry.csv"),
-    )?;
+    if status.reason != StatusReason::Ok || !status.table_ok {
+        let (what, todo) = crate::refusal::explain(status.reason);
+        return Err(format!(
+            "the board cannot arm ({:?}): {what}; to fix: {todo}",
+            status.reason
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// Arms the board; errors if it refuses.
+pub fn arm(sender: &Sender, replies: &Replies) -> Result<(), CmdError> {
+    sender.command(CommandKind::Arm);
+    let ack = replies.wait_for(Duration::from_secs(2), |m| match m {
+        Message::Ack(a) if a.seq == 0 => Some(a.ok),
+        _ => None,
+    });
+    match ack {
+        Some(true) => Ok(()),
+        Some(false) => Err("the board refused Arm: ask marionette stream's Status reason".into()),
+        None => Err("the board did not acknowledge Arm within 2 s".into()),
+    }
+}
+
+/// Waits (up to `limit`) for the board to acknowledge the `Disarm`: the
+/// board answers in order, so its replies to every frame before it (the
+/// telemetry, with the fail-safe trips) have then arrived, however far
+/// behind a loaded board ran. True if it did.
+pub fn await_disarm(replies: &Replies, limit: Duration) -> bool {
+    // The session's commands are `Arm` (seq 0) and `Disarm` (seq > 0).
+    let acked = replies.wait_for(limit, |m| match m {
+        Message::Ack(a) if a.seq > 0 => Some(()),
+        _ => None,
+    });
+    // The last bytes after the Ack (nothing the session needs).
+    std::thread::sleep(Duration::from_millis(50));
+    acked.is_some()
+}
+
+/// Offers each frame at its recorded time (or, `fast`, as soon as the
+/// last one went); returns the seconds it took.
+fn schedule(sender: &Sender, frames: &[TrackerFrame], fast: bool) -> f64 {
+    let start = Instant::now();
+    let first = frames.first().map_or(0, |f| f.time_us);
+    for f in frames {
+        if fast {
+            sender.drain(Duration::from_secs(3600));
+        } else {
+            let due = Duration::from_micros(u64::from(f.time_us.wrapping_sub(first)));
+            std::thread::sleep(due.saturating_sub(start.elapsed()));
+        }
+        sender.offer(*f);
+    }
+    start.elapsed().as_secs_f64()
+}
+
+/// Frames as a tracker recording.
+#[must_use]
+pub fn samples(frames: &[TrackerFrame]) -> Vec<TrackerSample> {
+    frames
+        .iter()
+        .flat_map(|f| {
+            f.sensors.as_slice().iter().map(|s| {
+                let [w, x, y, z] = s.rotation.map(f64::from);
+                TrackerSample {
+                    time_us: u64::from(f.time_us),
+                    sensor: s.id,
+                    position: glam::Vec3::from(s.position).as_dvec3(),
+                    orientation: glam::DQuat::from_xyzw(x, y, z, w),
+                }
+            })
+        })
+        .collect()
+}
+
+/// Writes the frames sent as a recording (every value exact).
+pub fn write_sent(path: &Path, frames: &[TrackerFrame]) -> Result<(), CmdError> {
+    let mut text = Vec::new();
+    super::record::write_csv_exact(&mut text, &samples(frames))
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    crate::save::save(path, &text, &[])?;
+    Ok(())
+}
+
+/// Streams the recording to the board and reports what happened.
+pub fn run(args: &Args) -> Result<(), CmdError> {
+    let (summary, _) = stream(args)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
-        println!(
-            "stream: {} frames sent; board answered {} status, {} acks ({} refused), {} telemetry; \
-             {} errors counted; telemetry in {}",
-            summary.frames,
-            summary.statuses,
-            summary.acks,
-            summary.refused,
-            summary.telemetry,
-            summary.errors,
-            summary.telemetry_csv
-        );
+        print_summary(&summary);
     }
     Ok(())
+}
+
+/// Streams the recording to the board; returns the summary and every
+/// message the board sent.
+pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
+    let _rig = rigfile::load(&rigfile::resolve(&args.rig))?;
+    let frames = perform::frames(&import::csv::read_tracker_csv(&args.recording)?)?;
+    let port = serialport::new(&args.port, args.baud)
+        .timeout(Duration::from_millis(50))
+        .open()
+        .map_err(|e| format!("{}: {e}", args.port))?;
+    let reader = port
+        .try_clone()
+        .map_err(|e| format!("{}: {e}", args.port))?;
+    let replies = Replies::spawn(reader);
+    let link = Link::Uart { baud: args.baud };
+    let sender = Sender::spawn(port, link, args.frame);
+    handshake(&sender, &replies, &args.port, Duration::from_secs(5))?;
+    arm(&sender, &replies)?;
+    let seconds = schedule(&sender, &frames, args.fast);
+    sender.drain(Duration::from_secs(2));
+    sender.command(CommandKind::Disarm);
+    let failed = sender.failed();
+    let (counts, sent) = sender.finish(Duration::from_secs(2));
+    let disarm_acked = await_disarm(&replies, Duration::from_secs(20));
+    let messages = replies.finish();
+    if let Some(e) = failed {
+        return Err(format!("{}: the port failed: {e}", args.port).into());
+    }
+    let sent_csv = args.out.join("sent.csv");
+    write_sent(&sent_csv, &sent)?;
+    let mut summary = Summary {
+        frames: frames.len(),
+        link_bytes_per_s: counts.bytes as f64 / seconds.max(1e-9),
+        link_capacity_bytes_per_s: link.bytes_per_second(),
+        sender: counts,
+        seconds,
+        sent_csv: sent_csv.display().to_string(),
+        disarm_acked,
+        ..Summary::default()
+    };
+    summarize(&messages, &mut summary, &args.out.join("telemetry.csv"))?;
+    Ok((summary, messages))
+}
+
+fn print_summary(s: &Summary) {
+    println!(
+        "stream: {} of {} frames sent, {} dropped (newest wins) in {:.2} s; link {:.0} B/s of \
+         {:.0} ({:.1} %)",
+        s.sender.sent,
+        s.frames,
+        s.sender.dropped,
+        s.seconds,
+        s.link_bytes_per_s,
+        s.link_capacity_bytes_per_s,
+        100.0 * s.link_bytes_per_s / s.link_capacity_bytes_per_s.max(1.0)
+    );
+    println!(
+        "board: {} status, {} acks ({} refused), {} telemetry; {} errors counted; state {}, \
+         {} fail-safe trips",
+        s.statuses,
+        s.acks,
+        s.refused,
+        s.telemetry,
+        s.errors,
+        state_name(s.state),
+        s.trips
+    );
+    if let Some(t) = s.timing {
+        println!("board frame time: {}", timing_line(&t));
+    }
+    if !s.disarm_acked {
+        println!("board: no Ack of Disarm within 20 s: its last replies may be missing");
+    }
+    println!(
+        "frames sent: {}; telemetry: {}",
+        s.sent_csv, s.telemetry_csv
+    );
+}
+
+/// The board's last reported state, for a summary line.
+#[must_use]
+pub fn state_name(state: Option<State>) -> String {
+    state.map_or_else(|| "unknown".to_owned(), |s| format!("{s:?}"))
+}
+
+/// The board's frame timing in one line (its counter units).
+#[must_use]
+pub fn timing_line(t: &FrameTiming) -> String {
+    let pct = |x: u32| 100.0 * f64::from(x) / f64::from(t.budget.max(1));
+    if t.budget == 0 {
+        format!(
+            "mean {}, worst {} counts over {} frames (no cycle counter: no budget)",
+            t.mean, t.worst, t.frames
+        )
+    } else {
+        format!(
+            "mean {} ({:.0} %), worst {} ({:.0} %) of a {}-count frame period; {} of {} frames \
+             overran it",
+            t.mean,
+            pct(t.mean),
+            t.worst,
+            pct(t.worst),
+            t.budget,
+            t.overruns,
+            t.frames
+        )
+    }
 }

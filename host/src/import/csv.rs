@@ -17,6 +17,10 @@
 //!   norm must be within [`NORM_TOLERANCE`] of 1; it is stored normalised.
 //!   `w ≥ 0` is not required.
 //!
+//! Limits, checked while reading (before more memory is taken): at most
+//! [`MAX_SAMPLES`] rows, and every time stamp within [`MAX_SPAN_US`] of
+//! every other (the wire's `u32` microsecond clock: 71 min 34.967 s).
+//!
 //! The header row is optional: if the first row's first field is not an
 //! integer, the row must be exactly the header above (names compared
 //! case-insensitively, surrounding spaces ignored). Blank lines and lines
@@ -42,6 +46,14 @@ use super::{ImportError, Lines};
 /// How far from 1 a quaternion's norm may be before it is rejected. x-io's
 /// files print 6 decimals and their norms are 1.00012.
 pub const NORM_TOLERANCE: f64 = 1e-3;
+
+/// Most samples (rows) in one recording: 2²¹, 35 minutes of one 1 kHz
+/// sensor, 11.6 of three (about 150 MB in memory).
+pub const MAX_SAMPLES: usize = 1 << 21;
+
+/// The widest span of time stamps in one recording, µs: the wire's clock
+/// is a `u32` of microseconds.
+pub const MAX_SPAN_US: u64 = u32::MAX as u64;
 
 /// The header row of a tracker CSV.
 pub const HEADER: [&str; 9] = ["time_us", "sensor", "x", "y", "z", "qw", "qx", "qy", "qz"];
@@ -94,6 +106,13 @@ impl<R: BufRead> TrackerReader<R> {
             rows: Rows::new(reader, file, &HEADER, false),
             done: false,
         }
+    }
+
+    /// Allows at most `max` samples (fewer than [`MAX_SAMPLES`]).
+    #[must_use]
+    pub fn with_limit(mut self, max: usize) -> Self {
+        self.rows.max_samples = max.min(MAX_SAMPLES);
+        self
     }
 }
 
@@ -188,6 +207,11 @@ struct Rows<R> {
     first_row: bool,
     /// Per sensor: last time and its line.
     last: Vec<Option<(u64, usize)>>,
+    /// Samples read so far, and the most allowed.
+    count: usize,
+    max_samples: usize,
+    /// Earliest and latest time stamp so far.
+    span: Option<(u64, u64)>,
 }
 
 type RowFields = (u8, DVec3, DQuat);
@@ -200,6 +224,9 @@ impl<R: BufRead> Rows<R> {
             header_required,
             first_row: true,
             last: vec![None; 256],
+            count: 0,
+            max_samples: MAX_SAMPLES,
+            span: None,
         }
     }
 
@@ -244,6 +271,7 @@ impl<R: BufRead> Rows<R> {
             let time_us = self.time(fields.first().copied())?;
             let (sensor, position, orientation) = parse(self, &fields)?;
             self.check_monotonic(sensor, time_us)?;
+            self.check_limits(time_us)?;
             return Ok(Some(TrackerSample {
                 time_us,
                 sensor,
@@ -312,6 +340,31 @@ impl<R: BufRead> Rows<R> {
         Ok(q / norm)
     }
 
+    /// [`MAX_SAMPLES`] and [`MAX_SPAN_US`].
+    fn check_limits(&mut self, time_us: u64) -> Result<(), ImportError> {
+        let field = self.header.first().copied().unwrap_or("time");
+        self.count += 1;
+        if self.count > self.max_samples {
+            let problem = format!(
+                "more than {} samples (the most one recording holds)",
+                self.max_samples
+            );
+            return Err(self.lines.invalid(field, problem));
+        }
+        let (lo, hi) = self.span.unwrap_or((time_us, time_us));
+        let (lo, hi) = (lo.min(time_us), hi.max(time_us));
+        if hi - lo > MAX_SPAN_US {
+            let problem = format!(
+                "{time_us} us is more than {MAX_SPAN_US} us (71 min 35 s, the range of the wire's \
+                 microsecond clock) from another sample's {} us",
+                if time_us == lo { hi } else { lo }
+            );
+            return Err(self.lines.invalid(field, problem));
+        }
+        self.span = Some((lo, hi));
+        Ok(())
+    }
+
     fn check_monotonic(&mut self, sensor: u8, time_us: u64) -> Result<(), ImportError> {
         let line = self.lines.number();
         let slot = self.last.get_mut(usize::from(sensor));
@@ -372,6 +425,34 @@ mod tests {
         let err = parse_tracker_csv(text.as_bytes(), "e.csv").unwrap_err();
         assert_eq!(err.line(), Some(2));
         assert!(err.to_string().contains("line 1"), "{err}");
+    }
+
+    #[test]
+    fn time_stamps_beyond_the_wire_clock_name_the_line() {
+        let max = u64::MAX;
+        let text = format!("0,0,0,0,0,1,0,0,0\n{max},0,0,0,0,1,0,0,0\n");
+        let err = parse_tracker_csv(text.as_bytes(), "e.csv").unwrap_err();
+        assert_eq!(err.line(), Some(2));
+        assert!(err.to_string().contains("71 min"), "{err}");
+        // Exactly the span still reads, from any epoch, any sensor order.
+        let edge = MAX_SPAN_US + 7;
+        let text = format!("{edge},1,0,0,0,1,0,0,0\n7,0,0,0,0,1,0,0,0\n");
+        assert_eq!(
+            parse_tracker_csv(text.as_bytes(), "e.csv").unwrap().len(),
+            2
+        );
+        let text = format!("{},1,0,0,0,1,0,0,0\n7,0,0,0,0,1,0,0,0\n", edge + 1);
+        assert!(parse_tracker_csv(text.as_bytes(), "e.csv").is_err());
+    }
+
+    #[test]
+    fn more_samples_than_the_limit_stop_the_reading() {
+        let rows = (0..=100).map(|t| format!("{t},0,0,0,0,1,0,0,0\n"));
+        let text: String = rows.collect();
+        let reader = TrackerReader::new(text.as_bytes(), "big.csv").with_limit(100);
+        let err = reader.collect::<Result<Vec<_>, _>>().unwrap_err();
+        assert_eq!(err.line(), Some(101));
+        assert!(err.to_string().contains("more than"), "{err}");
     }
 
     #[test]

@@ -10,8 +10,8 @@
 //! a joint tree in metres plus, per frame, the root position and each joint's
 //! rotation relative to its parent, in `f64`. [`Motion::core_skeleton`] and
 //! [`Motion::local_pose`] turn it into the core's
-//! [`Hierarchy`](marionette_core::pose::Hierarchy) and
-//! [`LocalPose`](marionette_core::pose::LocalPose) (`f32`), so that world
+//! [`Hierarchy`] and
+//! [`LocalPose`] (`f32`), so that world
 //! positions and orientations are always computed by the one forward
 //! kinematics of the project, [`marionette_core::pose::forward`].
 //!

@@ -328,6 +328,31 @@ impl Flavor for FrameFlavor<'_> {
 /// # Errors
 /// [`WireError::BufferFull`] if `out` is too small ([`MAX_FRAME`] always
 /// suffices).
+///
+/// # Example
+///
+/// A host encodes a tracker frame; the board's [`Receiver`] takes the bytes
+/// (in any chunks) and hands back the validated frame.
+///
+/// ```
+/// use marionette_core::wire::{
+///     Incoming, List, MAX_FRAME, Message, Receiver, Sensor, TrackerFrame, encode,
+/// };
+///
+/// let mut sensors = List::new();
+/// sensors.push(Sensor { id: 2, position: [0.1, 1.2, 0.3], rotation: [1.0, 0.0, 0.0, 0.0] }).unwrap();
+/// let frame = Message::TrackerFrame(TrackerFrame { seq: 1, time_us: 5_000, sensors });
+/// let mut buf = [0u8; MAX_FRAME];
+/// let bytes = encode(&frame, &mut buf).unwrap();
+///
+/// let mut board = Receiver::<512>::new();
+/// let mut input = bytes;
+/// assert_eq!(board.push_slice(&mut input), Some(Incoming::Tracker));
+/// let got = board.frame();
+/// assert_eq!((got.seq(), got.time_us()), (1, 5_000));
+/// assert_eq!(got.sensor(2).unwrap().position().to_array(), [0.1, 1.2, 0.3]);
+/// assert_eq!(board.errors().total(), 0);
+/// ```
 pub fn encode<'a>(msg: &Message, out: &'a mut [u8]) -> Result<&'a [u8], WireError> {
     let flavor = FrameFlavor {
         cobs: cobs::Encoder::new(&mut *out),

@@ -1,0 +1,315 @@
+//! Rig checks (#20): `rig check` (summary, hash, per-board verdict, unit and
+//! wiring slips), `inspect TABLE --rig RIG` (do they arm together, and why
+//! not), and JSON example sets built for a `[rig] file` (the rig's hash).
+//! The per-board verdicts are the firmware's: a 25-segment rig is booted on
+//! the emulated board, which must refuse it as `rig check` said.
+
+use marionette_host::{perform, rigfile};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn marionette(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_marionette"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn humanoid16() -> (PathBuf, String) {
+    let path = repo().join("rigs/humanoid16.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    (path, text)
+}
+
+/// humanoid16 with `extra` rigid segments hanging from the pelvis.
+fn with_segments(dir: &Path, extra: usize) -> PathBuf {
+    let (_, mut text) = humanoid16();
+    for i in 0..extra {
+        text.push_str(&format!(
+            "\n[[segment]]\nname = \"x{i:02}\"\nparent = \"pelvis\"\norigin = [0.0, 0.01, 0.0]\n"
+        ));
+    }
+    let path = dir.join(format!("h{}.toml", 13 + extra));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn rig_check_shows_the_hash_and_what_each_board_says() {
+    let (path, _) = humanoid16();
+    let o = marionette(&["rig", "check", s(&path)]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let hash = format!("{:#018x}", rigfile::load(&path).unwrap().rig_hash());
+    assert!(out.contains(&format!("hash {hash}")), "{out}");
+    assert!(
+        out.contains("13 segments, 16 DOFs, 16 servos on maestro at 115200 baud"),
+        "{out}"
+    );
+    assert!(out.contains("emulated   can drive it") && out.contains("blackpill  can drive it"));
+    assert!(out.contains("0 error(s), 0 warning(s)"), "{out}");
+
+    let o = marionette(&["rig", "check", s(&repo().join("rigs/cmu31.toml")), "--json"]);
+    assert!(o.status.success());
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["segments"], 31);
+    // 31 segments fit neither firmware; only the Black Pill has PWM timers.
+    let boards = doc["boards"].as_array().unwrap();
+    let problems = |i: usize| boards[i]["problems"].to_string();
+    assert_eq!(boards[0]["fits"], false);
+    assert!(
+        problems(0).contains("31 segments") && problems(0).contains("`pwm`"),
+        "{}",
+        problems(0)
+    );
+    assert_eq!(boards[1]["fits"], false);
+    assert!(
+        problems(1).contains("31 segments") && !problems(1).contains("pwm"),
+        "{}",
+        problems(1)
+    );
+    assert_eq!(
+        doc["warnings"].as_array().unwrap().len(),
+        1,
+        "one: no servos"
+    );
+}
+
+#[test]
+fn rig_check_finds_unit_and_wiring_slips_with_their_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, text) = humanoid16();
+    let line_of = |t: &str, needle: &str| t[..t.find(needle).unwrap()].lines().count() + 1;
+    // Degrees in the radians key of servo 0; a 19 m shin (centimetres in
+    // metres); servo 3 moved from l_upper_arm.z onto l_upper_arm.x, which
+    // servo 2 drives: x driven twice, z by none.
+    let slip = text
+        .replacen("angle_deg = [", "angle = [", 1)
+        .replacen(
+            "origin = [0.0, -0.19, 0.0]      # knee",
+            "origin = [0.0, -19, 0.0]",
+            1,
+        )
+        .replacen(
+            "channel = 3\njoint = \"l_upper_arm\"\naxis = \"z\"",
+            "channel = 3\njoint = \"l_upper_arm\"\naxis = \"x\"",
+            1,
+        );
+    let path = dir.path().join("slip.toml");
+    std::fs::write(&path, &slip).unwrap();
+    let o = marionette(&["rig", "check", s(&path), "--json"]);
+    assert_eq!(o.status.code(), Some(1));
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let errors = doc["errors"].as_array().unwrap();
+    assert_eq!(errors.len(), 1, "{doc}");
+    assert_eq!(errors[0]["field"], "servo[3]");
+    assert_eq!(errors[0]["line"], line_of(&slip, "channel = 3") - 1);
+    assert!(
+        errors[0]["message"]
+            .as_str()
+            .unwrap()
+            .contains("l_upper_arm.x")
+    );
+    let warnings: Vec<(String, u64)> = doc["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| {
+            (
+                w["field"].as_str().unwrap().to_owned(),
+                w["line"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    let want = [
+        (
+            "segment[3].dofs[1]".to_owned(),
+            line_of(&slip, "name = \"l_upper_arm\"") as u64 - 1,
+        ),
+        (
+            "segment[8].origin".to_owned(),
+            line_of(&slip, "name = \"l_shin\"") as u64 - 1,
+        ),
+        (
+            "servo[0].angle".to_owned(),
+            line_of(&slip, "angle = [") as u64,
+        ),
+    ];
+    assert_eq!(warnings, want, "{doc}");
+}
+
+#[test]
+fn a_rig_over_the_firmware_capacity_is_named_and_the_board_agrees() {
+    let dir = tempfile::tempdir().unwrap();
+    let h25 = with_segments(dir.path(), 12);
+    let o = marionette(&["rig", "check", s(&h25)]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("emulated   cannot: 25 segments; its firmware holds at most 24"),
+        "{out}"
+    );
+    // The emulated board itself: it refuses the 25-segment rig at boot.
+    let rig = rigfile::load(&h25).unwrap();
+    let table = perform::rest_grid(&rig, &[("a", -0.5, 0.5, 3)]).unwrap();
+    let table_file = dir.path().join("rest.bin");
+    std::fs::write(&table_file, table).unwrap();
+    let rec = dir.path().join("rec.csv");
+    std::fs::write(
+        &rec,
+        "time_us,sensor,x,y,z,qw,qx,qy,qz\n0,0,0,1,0,1,0,0,0\n",
+    )
+    .unwrap();
+    let o = marionette(&[
+        "emulate",
+        "--rig",
+        s(&h25),
+        "--tables",
+        s(&table_file),
+        "--recording",
+        s(&rec),
+        "--out",
+        s(&dir.path().join("out")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("RigTooLarge") && err.contains("25 segments"),
+        "{err}"
+    );
+    // 24 segments: both boards can drive it.
+    let h24 = with_segments(dir.path(), 11);
+    let o = marionette(&["rig", "check", s(&h24)]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("emulated   can drive it"), "{out}");
+}
+
+#[test]
+fn inspect_says_whether_a_rig_and_a_table_arm_together() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, text) = humanoid16();
+    let rig = rigfile::load(&path).unwrap();
+    let table = dir.path().join("rest.bin");
+    std::fs::write(
+        &table,
+        perform::rest_grid(&rig, &[("a", -0.5, 0.5, 3)]).unwrap(),
+    )
+    .unwrap();
+    let o = marionette(&["inspect", s(&table), "--rig", s(&path), "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["arming"]["arms"], true);
+    assert_eq!(doc["arming"]["boards"][1]["arms"], true, "{doc}");
+    // Another rig (a longer shin): the hashes differ, named.
+    let other = dir.path().join("other.toml");
+    std::fs::write(&other, text.replacen("-0.18, 0.0]", "-0.2, 0.0]", 1)).unwrap();
+    let o = marionette(&["inspect", s(&table), "--rig", s(&other)]);
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(out.contains("RigMismatch") && err.contains("would refuse to arm: RigMismatch"));
+    // A PCA9685 rig: the core arms, the emulated board has no I2C, the
+    // Black Pill drives it.
+    let pca = dir.path().join("pca.toml");
+    let maestro = "kind = \"maestro\"                # Pololu Maestro, compact protocol over UART\nbaud = 115200";
+    assert!(text.contains(maestro));
+    std::fs::write(
+        &pca,
+        text.replace(maestro, "kind = \"pca9685\"\ni2c_addr = 0x40\nfreq_hz = 50"),
+    )
+    .unwrap();
+    let o = marionette(&["inspect", s(&table), "--rig", s(&pca), "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["arming"]["arms"], true);
+    assert_eq!(doc["arming"]["boards"][0]["reason"], "Unsupported");
+    assert_eq!(doc["arming"]["boards"][1]["arms"], true);
+    // On-chip PWM with 16 channels: the Black Pill has 12; no board arms.
+    let pwm = dir.path().join("pwm.toml");
+    std::fs::write(&pwm, text.replace(maestro, "kind = \"pwm\"\nfreq_hz = 50")).unwrap();
+    let o = marionette(&["inspect", s(&table), "--rig", s(&pwm), "--json"]);
+    assert_eq!(
+        o.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["arming"]["boards"][0]["reason"], "Unsupported");
+    let detail = doc["arming"]["boards"][1]["detail"].as_str().unwrap();
+    assert!(detail.contains("channel 12"), "{detail}");
+    // A region image is named as one.
+    let region = dir.path().join("region.bin");
+    let image = perform::region(
+        &rigfile::to_blob(&rig).unwrap(),
+        Some(&std::fs::read(&table).unwrap()),
+    );
+    std::fs::write(&region, image).unwrap();
+    let o = marionette(&["inspect", s(&region)]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("region image"), "{err}");
+}
+
+#[test]
+fn a_json_example_set_built_for_a_rig_file_has_the_rigs_hash() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rig, _) = humanoid16();
+    // A two-example set over humanoid16's segments, in the rig's order.
+    let names = rigfile::load(&rig).unwrap().segment_names().to_vec();
+    let pose = |y: f64| {
+        let segs: Vec<String> = (0..names.len())
+            .map(|i| format!("[0, {}, 0, 1, 0, 0, 0]", y + 0.1 * i as f64))
+            .collect();
+        format!("[{}]", segs.join(", "))
+    };
+    let set = dir.path().join("set.json");
+    let quoted: Vec<String> = names.iter().map(|n| format!("{n:?}")).collect();
+    std::fs::write(
+        &set,
+        format!(
+            "{{\n\"segments\": [{}],\n\"axes\": [{{\"name\": \"a\", \"min\": 0, \"max\": 1, \"count\": 2}}],\n\
+             \"examples\": [{{\"params\": [0], \"pose\": {}}}, {{\"params\": [1], \"pose\": {}}}]\n}}\n",
+            quoted.join(", "),
+            pose(0.4),
+            pose(0.5)
+        ),
+    )
+    .unwrap();
+    let with_rig = dir.path().join("with_rig.toml");
+    std::fs::write(
+        &with_rig,
+        format!("examples = \"set.json\"\n\n[rig]\nfile = {:?}\n", s(&rig)),
+    )
+    .unwrap();
+    let table = dir.path().join("t.bin");
+    let o = marionette(&["build", s(&with_rig), "-o", s(&table), "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = marionette(&["inspect", s(&table), "--rig", s(&rig)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stdout));
+    // Without [rig] the hash is the set's own, and the rig refuses it.
+    let bare = dir.path().join("bare.toml");
+    std::fs::write(&bare, "examples = \"set.json\"\n").unwrap();
+    let o = marionette(&["build", s(&bare), "-o", s(&table), "--quiet"]);
+    assert!(o.status.success());
+    let o = marionette(&["inspect", s(&table), "--rig", s(&rig)]);
+    assert_eq!(o.status.code(), Some(3));
+    // A set whose segments are not the rig's is refused, naming the field.
+    let text = std::fs::read_to_string(&set).unwrap();
+    std::fs::write(&set, text.replacen("\"pelvis\"", "\"hips\"", 1)).unwrap();
+    let o = marionette(&["build", s(&with_rig), "-o", s(&table), "--quiet"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        err.contains("set.json:") && err.contains("segments") && err.contains("hips"),
+        "{err}"
+    );
+}
