@@ -5,6 +5,8 @@
 //! 2000]`, small step 10 µs, large step 100 µs), and the rig file written
 //! must be the original with exactly the calibrated lines changed.
 //!
+//! The same on Dynamixel bus servos, in positions.
+//!
 //! Skipped, with a message, only when tmux is not installed (`.ci/setup`
 //! installs it); QEMU is required like every emulated-board test.
 
@@ -81,25 +83,26 @@ max_speed = 7.0
 max_accel = 60.0
 ";
 
-#[test]
-fn calibrate_in_a_terminal_jogs_the_emulated_board_and_writes_the_rig() {
+/// Starts `marionette calibrate --channel 1` on a copy of `rig_text` in a
+/// private tmux server; returns it (killed when dropped), the rig's path and
+/// the temporary directory holding it. `None` (with the skip message) when
+/// tmux is missing.
+fn start(rig_text: &str) -> Option<(Tmux, std::path::PathBuf, tempfile::TempDir)> {
     if !tmux_installed() {
         eprintln!(
             "SKIPPED: tmux is not installed (run .ci/setup); calibrate's terminal test needs it"
         );
-        return;
+        return None;
     }
     // Built here first, so that the tool's own build is a no-op.
     marionette_host::qemu::build_firmware("perform").expect("firmware builds");
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let original = std::fs::read_to_string(repo.join("rigs/humanoid16.toml")).unwrap();
-    assert!(original.contains(CHANNEL_1));
     let dir = tempfile::tempdir().unwrap();
     let rig = dir.path().join("puppet.toml");
-    std::fs::write(&rig, &original).unwrap();
-
+    std::fs::write(&rig, rig_text).unwrap();
+    static SESSIONS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let n = SESSIONS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let tmux = Tmux {
-        socket: format!("marionette-calibrate-{}", std::process::id()),
+        socket: format!("marionette-calibrate-{}-{n}", std::process::id()),
     };
     let line = format!(
         "'{}' calibrate --rig '{}' --channel 1; echo EXIT=$?; sleep 600",
@@ -117,6 +120,21 @@ fn calibrate_in_a_terminal_jogs_the_emulated_board_and_writes_the_rig() {
         "24",
         &line,
     ]);
+    Some((tmux, rig, dir))
+}
+
+fn shipped_rig() -> String {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    std::fs::read_to_string(repo.join("rigs/humanoid16.toml")).unwrap()
+}
+
+#[test]
+fn calibrate_in_a_terminal_jogs_the_emulated_board_and_writes_the_rig() {
+    let original = shipped_rig();
+    assert!(original.contains(CHANNEL_1));
+    let Some((tmux, rig, _dir)) = start(&original) else {
+        return;
+    };
     tmux.wait_for(&["channel 1, range 1000 µs..2000 µs", "commanded 1500 µs"]);
 
     // 1500 + 2·100 + 10.
@@ -162,5 +180,61 @@ fn calibrate_in_a_terminal_jogs_the_emulated_board_and_writes_the_rig() {
     assert_eq!(
         (servo.pulse_min_us, servo.pulse_max_us, servo.rest_us),
         (1190.0, 1990.0, 1240.0)
+    );
+}
+
+/// The same puppet on Dynamixel bus servos: positions (4096 a turn, centre
+/// 2048), channel 1's ±45° are 2048 ∓ 512; the board's Sync Writes carry the
+/// positions, and the tool writes `limits` and `center`.
+#[test]
+fn calibrate_moves_a_bus_servo_in_positions_and_writes_limits_and_center() {
+    let maestro = "kind = \"maestro\"                # Pololu Maestro, compact protocol over UART\nbaud = 115200\n";
+    let original = shipped_rig();
+    assert!(original.contains(maestro));
+    let bus: String = original
+        .replacen(maestro, "kind = \"dynamixel\"\nbaud = 1000000\n", 1)
+        .lines()
+        .filter(|l| !l.starts_with("pulse_us =") && !l.starts_with("trim_us ="))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let Some((tmux, rig, _dir)) = start(&bus) else {
+        return;
+    };
+    tmux.wait_for(&["channel 1, range 1536..2560", "position: commanded 2048"]);
+    // 2048 + 2·50 + 5.
+    tmux.keys(&["k", "k", "l", "x"]);
+    tmux.wait_for(&["commanded 2153, on the servo link 2153", "max 2153"]);
+    // 2153 − 6·50 = 1853.
+    tmux.keys(&["j", "j", "j", "j", "j", "j", "n"]);
+    tmux.wait_for(&["commanded 1853, on the servo link 1853", "min 1853"]);
+    // 1853 + 3·50 = 2003.
+    tmux.keys(&["k", "k", "k", "c", "w"]);
+    tmux.wait_for(&["centre 2003", "wrote "]);
+    tmux.keys(&["q"]);
+    tmux.wait_for(&["on the servo link 2048", "EXIT=0"]);
+
+    let entry = CHANNEL_1.replace("pulse_us = [1000, 2000]\n", "");
+    let written = std::fs::read_to_string(&rig).unwrap();
+    let expected = bus.replacen(
+        &entry,
+        &entry.replace(
+            "max_accel = 60.0\n",
+            "max_accel = 60.0\nlimits = [1853, 2153]\ncenter = 2003\n",
+        ),
+        1,
+    );
+    assert_eq!(written, expected, "only channel 1's limits change");
+    let loaded = marionette_host::rigfile::load(&rig).unwrap();
+    let servo = loaded
+        .desc()
+        .servos
+        .iter()
+        .find(|s| s.channel == 1)
+        .copied()
+        .unwrap();
+    // 2003 ± 512 within the limits; at rest (angle 0) the centre.
+    assert_eq!(
+        (servo.pulse_min_us, servo.pulse_max_us, servo.rest_us),
+        (1853.0, 2153.0, 2003.0)
     );
 }

@@ -4,8 +4,8 @@
 //! The rig gives each servo channel a bus ID ([`ServoDesc::id`]); the
 //! targets are positions in quarter units (the slew limiter's unit, as
 //! quarter-µs are for the pulse back-ends), rounded to whole positions on
-//! the wire. One [`ServoOutput::write`](super::ServoOutput::write) sends, in this order and only when
-//! needed:
+//! the wire. One [`ServoOutput::write`](super::ServoOutput::write) sends,
+//! in this order and only when needed:
 //!
 //! 1. a Sync Write of Torque Enable = 1 to the servos that get a position
 //!    and are not known to have torque on (all of them on the first frame:
