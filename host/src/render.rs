@@ -887,6 +887,7 @@ fn draw_panel<DB: DrawingBackend>(
                 .map_err(de)?;
         }
     }
+    let mut placed: Vec<LabelBox> = Vec::new();
     for g in &fig.goals {
         if let Some(c) = proj.px(g.target) {
             panel
@@ -895,11 +896,46 @@ fn draw_panel<DB: DrawingBackend>(
             panel
                 .draw(&Circle::new(c, r(8.0), stroke(GOAL, 1.5)))
                 .map_err(de)?;
-            let at = (c.0 + r(11.0), c.1 - r(11.0));
-            text(panel, &g.label, at, 14.0 * k, GOAL, LEFT_CENTRE)?;
+            let size = 14.0 * k;
+            let at = place_label(c, g.label.chars().count(), size, &mut placed);
+            text(panel, &g.label, at, size, GOAL, LEFT_CENTRE)?;
         }
     }
     draw_guides(panel, b, &proj, k)
+}
+
+/// A placed label's box in pixels: left, top, right, bottom.
+type LabelBox = (i32, i32, i32, i32);
+
+/// Where a label of `chars` characters at `size` px goes beside the mark at
+/// `c` (its left end, vertically centred): the first of eight places around
+/// the mark (up-right first, then down-right, left, and further out) whose
+/// box overlaps no label already `placed`; the first place if every one
+/// does. The width is estimated at 0.62 em per character (sans-serif).
+fn place_label(c: (i32, i32), chars: usize, size: f64, placed: &mut Vec<LabelBox>) -> (i32, i32) {
+    let w = (chars as f64 * 0.62 * size).ceil() as i32;
+    let h = (size * 1.2).ceil() as i32;
+    let gap = (size * 0.8).round() as i32;
+    let (right, left) = (c.0 + gap, c.0 - gap - w);
+    let candidates = [
+        (right, c.1 - gap),
+        (right, c.1 + gap),
+        (left, c.1 - gap),
+        (left, c.1 + gap),
+        (right, c.1 - gap - h),
+        (right, c.1 + gap + h),
+        (left, c.1 - gap - h),
+        (left, c.1 + gap + h),
+    ];
+    let boxed = |(x, y): (i32, i32)| (x, y - h / 2, x + w, y + h / 2);
+    let overlaps = |a: LabelBox, b: &LabelBox| a.0 < b.2 && b.0 < a.2 && a.1 < b.3 && b.1 < a.3;
+    let at = candidates
+        .iter()
+        .copied()
+        .find(|&p| !placed.iter().any(|q| overlaps(boxed(p), q)))
+        .unwrap_or(candidates[0]);
+    placed.push(boxed(at));
+    at
 }
 
 /// Axis indicator (bottom left) and scale bar (bottom right) of an
@@ -1167,18 +1203,31 @@ impl Default for PlotOptions {
     }
 }
 
-/// Line colours (Tableau 10), then plotters' 99-colour palette.
-const PALETTE: [RGBColor; 10] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(127, 127, 127),
-    RGBColor(188, 189, 34),
-    RGBColor(23, 190, 207),
+/// Line colours: Kelly's 22 colours of maximum contrast without white and
+/// black (K. L. Kelly, "Twenty-two colors of maximum contrast", 1965; sRGB
+/// values as commonly tabulated), light yellow replaced by a darker gold so
+/// that every line shows on white; past them, plotters' 99-colour palette.
+const PALETTE: [RGBColor; 20] = [
+    RGBColor(0xF3, 0x84, 0x00), // orange
+    RGBColor(0x87, 0x56, 0x92), // purple
+    RGBColor(0xA1, 0xCA, 0xF1), // light blue
+    RGBColor(0xBE, 0x00, 0x32), // red
+    RGBColor(0xC2, 0xB2, 0x80), // buff
+    RGBColor(0x84, 0x84, 0x82), // grey
+    RGBColor(0x00, 0x88, 0x56), // green
+    RGBColor(0xE6, 0x8F, 0xAC), // purplish pink
+    RGBColor(0x00, 0x67, 0xA5), // blue
+    RGBColor(0xF9, 0x93, 0x79), // yellowish pink
+    RGBColor(0x60, 0x4E, 0x97), // violet
+    RGBColor(0xF6, 0xA6, 0x00), // orange yellow
+    RGBColor(0xB3, 0x44, 0x6C), // purplish red
+    RGBColor(0xB8, 0xA4, 0x00), // gold (for Kelly's greenish yellow)
+    RGBColor(0x88, 0x2D, 0x17), // reddish brown
+    RGBColor(0x8D, 0xB6, 0x00), // yellow green
+    RGBColor(0x65, 0x45, 0x22), // yellowish brown
+    RGBColor(0xE2, 0x58, 0x22), // reddish orange
+    RGBColor(0x2B, 0x3D, 0x26), // olive green
+    RGBColor(0x22, 0x22, 0x22), // near black
 ];
 
 fn colour(i: usize) -> RGBColor {
@@ -1186,6 +1235,15 @@ fn colour(i: usize) -> RGBColor {
         let c = Palette99::pick(i).to_rgba();
         RGBColor(c.0, c.1, c.2)
     })
+}
+
+/// The legend column's width in pixels for `names` (beside the plot, so
+/// that it never covers a curve): 7.5 px per character at 14 px text, plus
+/// the line sample, within [120, width / 3].
+fn legend_width(names: &[&str], width: u32) -> u32 {
+    let longest = names.iter().map(|n| n.chars().count()).max().unwrap_or(0);
+    let w = 48 + (longest as f64 * 7.5).ceil() as u32;
+    w.clamp(120, (width / 3).max(120))
 }
 
 /// Draws every column of `series` against time into `path` (`.png` or
@@ -1230,7 +1288,15 @@ fn draw_plot<DB: DrawingBackend>(
 ) -> DrawResult {
     root.fill(&WHITE).map_err(de)?;
     let font = font_available();
-    let mut builder = ChartBuilder::on(root);
+    let names: Vec<&str> = series.columns.iter().map(|c| c.name.as_str()).collect();
+    let (plot_area, legend) = if font {
+        let (w, _) = root.dim_in_pixel();
+        root.split_horizontally(w.saturating_sub(legend_width(&names, w)))
+    } else {
+        // No font, no legend: the whole area plots.
+        root.split_horizontally(root.dim_in_pixel().0)
+    };
+    let mut builder = ChartBuilder::on(&plot_area);
     builder.margin(16);
     if font {
         builder.x_label_area_size(48).y_label_area_size(80);
@@ -1253,28 +1319,35 @@ fn draw_plot<DB: DrawingBackend>(
     }
     mesh.draw().map_err(de)?;
     for (i, col) in series.columns.iter().enumerate() {
-        let c = colour(i);
-        let style = c.stroke_width(2);
-        let mut first = true;
+        let style = colour(i).stroke_width(2);
         for run in runs(&series.time, &col.values) {
-            let drawn = chart.draw_series(LineSeries::new(run, style)).map_err(de)?;
-            if first {
-                drawn
-                    .label(col.name.clone())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
-                first = false;
-            }
+            chart.draw_series(LineSeries::new(run, style)).map_err(de)?;
         }
     }
     if font {
-        chart
-            .configure_series_labels()
-            .label_font((FAMILY, 14))
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(de)?;
+        draw_series_legend(&legend, &names)?;
+    }
+    Ok(())
+}
+
+/// The series' names, one per row with its line colour, in their own
+/// column beside the plot.
+fn draw_series_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    names: &[&str],
+) -> DrawResult {
+    let (_, h) = area.dim_in_pixel();
+    let top = 64;
+    let row = (i64::from(h.saturating_sub(top as u32 + 64)) / names.len().max(1) as i64)
+        .clamp(1, 22) as i32;
+    for (i, name) in names.iter().enumerate() {
+        let y = top + row * i32::try_from(i).unwrap_or(i32::MAX / 64);
+        area.draw(&PathElement::new(
+            vec![(4, y), (28, y)],
+            colour(i).stroke_width(3),
+        ))
+        .map_err(de)?;
+        text(area, name, (36, y), 14.0, BLACK, LEFT_CENTRE)?;
     }
     Ok(())
 }
@@ -1483,6 +1556,22 @@ mod tests {
         assert_eq!(s.columns[0].values, vec![3.0]);
         let err = s.select(&["zz".into()]).unwrap_err();
         assert!(err.to_string().contains("\"zz\""), "{err}");
+    }
+
+    #[test]
+    fn labels_at_one_spot_do_not_overlap() {
+        // Four goals on one pixel (two feet seen from the side) and one
+        // beside them: every label box is disjoint from the others.
+        let mut placed = Vec::new();
+        for c in [(100, 100), (100, 100), (100, 100), (100, 100), (104, 98)] {
+            place_label(c, 11, 14.0, &mut placed);
+        }
+        for (i, a) in placed.iter().enumerate() {
+            for b in &placed[i + 1..] {
+                let overlap = a.0 < b.2 && b.0 < a.2 && a.1 < b.3 && b.1 < a.3;
+                assert!(!overlap, "{a:?} overlaps {b:?}");
+            }
+        }
     }
 
     #[test]

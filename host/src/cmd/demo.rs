@@ -16,7 +16,7 @@
 //! 3. **Draw**: the servo curves the board sent, and the figure (the native
 //!    core's solved pose, with its goals) at a few times, in four views.
 //!
-//! Written to `--out` (default `out/`): `reach_humanoid16.bin` (the table
+//! Written to `--out` (default `out/`): `SPEC_STEM.bin`, e.g. `reach_humanoid16.bin` (the table
 //! blob), `region.bin` (rig + table, as flashed), `servo_emulated.csv`
 //! (`time_us,ch0..ch15`, µs), `servo_emulated.png`, and `frame_<k>.png`.
 
@@ -338,6 +338,7 @@ fn marks(rig: &Rig<'_>, frame: &TrackerFrame, pose: &Pose<MAX_SEGMENTS>) -> Vec<
 /// Draws the sampled poses: `frame_<k>.png`.
 fn draw_frames(
     rig: &Rig<'_>,
+    recording: &str,
     frames: &[TrackerFrame],
     poses: &[(u32, Pose<MAX_SEGMENTS>)],
     out: &Path,
@@ -351,7 +352,8 @@ fn draw_frames(
         };
         let t = f64::from(frame.time_us.wrapping_sub(first)) * 1e-6;
         let title = format!(
-            "humanoid16, t = {t:.2} s (tracker frame {seq} of {}): solved pose and goals",
+            "{}, {recording}, t = {t:.2} s (frame {seq} of {}): solved pose and goals",
+            rig.name(),
             frames.len()
         );
         let mut fig = Figure::from_pose(&body, pose, title)?;
@@ -363,13 +365,23 @@ fn draw_frames(
     Ok(files)
 }
 
-/// Plots `servo_emulated.csv` into `servo_emulated.png`.
-fn plot_servos(csv: &Path) -> Result<PathBuf, CmdError> {
+/// Plots `servo_emulated.csv` into `servo_emulated.png`, each line named
+/// by its channel and the joint it turns (`ranges`), titled `title`.
+fn plot_servos(csv: &Path, ranges: &[ServoRange], title: String) -> Result<PathBuf, CmdError> {
     let text = std::fs::read_to_string(csv).map_err(|e| format!("{}: {e}", csv.display()))?;
-    let series = Series::parse_csv(&text).map_err(|e| format!("{}: {e}", csv.display()))?;
+    let mut series = Series::parse_csv(&text).map_err(|e| format!("{}: {e}", csv.display()))?;
+    for col in &mut series.columns {
+        let channel = col
+            .name
+            .strip_prefix("ch")
+            .and_then(|n| n.parse::<u8>().ok());
+        if let Some(r) = ranges.iter().find(|r| Some(r.channel) == channel) {
+            col.name = format!("{} {}", col.name, r.joint);
+        }
+    }
     let path = csv.with_extension("png");
     let opt = PlotOptions {
-        title: "servo targets sent by the emulated board (HDM05 grab, held out)".into(),
+        title,
         y_label: "pulse (µs)".into(),
         ..PlotOptions::default()
     };
@@ -384,7 +396,16 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     let recording = repo_path(&args.recording);
     let built = build_table(&spec_path)?;
     let build_seconds = start.elapsed().as_secs_f64();
-    let table_file = args.out.join("reach_humanoid16.bin");
+    // Named for the spec it was built from (`reach_humanoid16.toml` ->
+    // `reach_humanoid16.bin`).
+    let stem = spec_path
+        .file_stem()
+        .map_or_else(|| "table".to_string(), |s| s.to_string_lossy().into_owned());
+    let table_file = args.out.join(format!("{stem}.bin"));
+    let recording_name = recording.file_name().map_or_else(
+        || recording.display().to_string(),
+        |s| s.to_string_lossy().into_owned(),
+    );
     crate::save::save(
         &table_file,
         &built.blob,
@@ -420,9 +441,25 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         table_file.display().to_string(),
         args.out.join("region.bin").display().to_string(),
         servo_csv.display().to_string(),
-        plot_servos(&servo_csv)?.display().to_string(),
+        plot_servos(
+            &servo_csv,
+            &servo_ranges(rig, &board),
+            format!(
+                "{}: servo targets sent by the emulated board ({recording_name})",
+                rig.name()
+            ),
+        )?
+        .display()
+        .to_string(),
     ];
-    for f in draw_frames(rig, &tracker_frames, &native.poses, &args.out)? {
+    let frames = draw_frames(
+        rig,
+        &recording_name,
+        &tracker_frames,
+        &native.poses,
+        &args.out,
+    )?;
+    for f in frames {
         files.push(f.display().to_string());
     }
     let (errors, hand_residual_mm) = telemetry(&board.replies);
