@@ -193,7 +193,7 @@ fn header_axes(spec: &TableSpec) -> Result<[Axis; MAX_AXES], BlobError> {
             wrap: a.wrap,
             interp: a.interp,
         };
-        if !axis.is_valid() {
+        if marionette_core::grid::Axis::try_from(&axis).is_err() {
             let reason = "needs count ≥ 2, finite min, finite step > 0 and period = count · step";
             return Err(BlobError::Axis {
                 index,

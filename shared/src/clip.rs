@@ -59,7 +59,7 @@
 
 use glam::{Quat, Vec3};
 
-use crate::grid::{Adjust, AxisKind, Grid, GridError, MAX_AXES, Samples};
+use crate::grid::{Adjust, Grid, GridError, MAX_AXES, Samples, Wrap};
 use crate::math::{self, SlerpWeight};
 use crate::pose::Pose;
 
@@ -159,9 +159,9 @@ impl<'a> Clips<'a> {
         };
         let same = head.len() == p.len() && head.iter().zip(p).all(|(a, b)| a == b);
         let n = phases as f32;
-        let ok = match phase.kind {
-            AxisKind::Cyclic { period } => phases == 1 && math::abs(period - 1.0) <= 1e-5,
-            AxisKind::Bounded => {
+        let ok = match phase.wrap {
+            Wrap::Cyclic { period } => phases == 1 && math::abs(period - 1.0) <= 1e-5,
+            Wrap::Bounded => {
                 let frames = phase.count - 1;
                 math::abs(phase.step * frames as f32 - n) <= 1e-5 * n
                     && frames.checked_rem(phases as u32) == Some(0)
@@ -170,7 +170,7 @@ impl<'a> Clips<'a> {
         if !same || !ok || phase.min != 0.0 {
             return Err(ClipError::Layout);
         }
-        let looping = matches!(phase.kind, AxisKind::Cyclic { .. });
+        let looping = matches!(phase.wrap, Wrap::Cyclic { .. });
         Ok(Self {
             grid,
             params,
@@ -533,7 +533,7 @@ mod tests {
             min: 0.0,
             step: 0.25,
             count: 4,
-            kind: AxisKind::Cyclic { period: 1.0 },
+            wrap: Wrap::Cyclic { period: 1.0 },
             interp: Interp::Linear,
         };
         let grid = Grid::new(&[speed, cyc], None).unwrap();

@@ -101,9 +101,8 @@
 //! not clip the largest coordinate and refuses coordinates beyond
 //! [`quant::MAX_POSITION`] = 32 m, so the position bound is below 0.5 mm
 //! (0.498 mm at the full 32 m range, 0.031 mm for a 2 m figure). Both bounds
-//! are stored in the header; `tests/table.rs` measures them against an `f64`
-//! reference (max 1.495e-4 rad over 10⁶ random and edge-case rotations;
-//! 0.490 mm at the 32 m range).
+//! are stored in the header; `tests/table.rs` checks them against an `f64`
+//! reference over random and edge-case rotations and at the 32 m range.
 //!
 //! # Size
 //!
@@ -113,15 +112,10 @@
 //! defines no directory of several blobs; the reader ignores what follows
 //! `total_len`, so blobs could be placed back to back at 4-aligned offsets).
 //!
-//! On the emulated Cortex-M4F (QEMU `-icount`, instruction counts, not
-//! cycles) that blob parses in about 267,000 instructions (almost all of it
-//! the CRC) and [`Table::sample`] costs about 95 instructions per segment
-//! sample (three word loads, the three small components as integers to
-//! floats, one range check, `rest · rsqrt(rest)` and one Newton step of
-//! renormalization). The grid reads a segment's whole window before
-//! interpolating ([`Samples::DECODES`]); a fresh query and the 16-segment
-//! pose of a trilinear table cost about 22,000 instructions
-//! (`synth.table16.core` in `marionette icount`).
+//! [`Table::sample`] decodes one segment sample on each call (no cache);
+//! the grid reads a segment's whole window before interpolating
+//! ([`Samples::DECODES`]). Instruction counts are in README's measured
+//! section (`synth.table16.core`, `marionette icount`).
 
 mod header;
 pub mod quant;
@@ -261,10 +255,10 @@ fn shape(header: &Header<'_>) -> Result<Shape, TableError> {
         param_cells: 1,
     };
     for (i, axis) in axes.iter().enumerate() {
-        if !axis.is_valid() {
-            // `i < MAX_AXES = 6`, so it fits a u8.
-            return Err(TableError::BadAxis { index: i as u8 });
-        }
+        // `i < MAX_AXES = 6`, so it fits a u8.
+        let cells = grid::Axis::try_from(axis)
+            .map_err(|_| TableError::BadAxis { index: i as u8 })?
+            .cells() as usize;
         let count = usize::from(axis.count);
         shape.grid_samples = shape
             .grid_samples
@@ -274,7 +268,7 @@ fn shape(header: &Header<'_>) -> Result<Shape, TableError> {
             shape.param_samples = shape.grid_samples;
             shape.param_cells = shape
                 .param_cells
-                .checked_mul(axis.cells())
+                .checked_mul(cells)
                 .ok_or(TableError::BadBounds)?;
         }
     }
@@ -522,7 +516,7 @@ impl<'a> Table<'a> {
     /// A grid table carries its validity mask; a clip table's mask covers the
     /// parameter cells only, see [`Table::param_grid`].
     pub fn grid(&self) -> Result<Grid<'a>, GridError> {
-        let (axes, n) = grid_axes(self.axes());
+        let (axes, n) = grid_axes(self.axes())?;
         let mask = match self.header.kind {
             Kind::Grid => Some(self.valid),
             Kind::Clips { .. } => None,
@@ -534,7 +528,7 @@ impl<'a> Table<'a> {
     /// grid table, the parameter grid of a clip table (whose clips are
     /// parameter samples; [`GridError::AxisCount`] for a single clip).
     pub fn param_grid(&self) -> Result<Grid<'a>, GridError> {
-        let (axes, n) = grid_axes(self.param_axes());
+        let (axes, n) = grid_axes(self.param_axes())?;
         Grid::new(axes.get(..n).unwrap_or(&[]), Some(self.valid))
     }
 
@@ -610,14 +604,14 @@ impl<'a> Table<'a> {
 }
 
 /// The grid axes of `axes`, and how many there are.
-fn grid_axes(axes: &[Axis]) -> ([grid::Axis; MAX_AXES], usize) {
+fn grid_axes(axes: &[Axis]) -> Result<([grid::Axis; MAX_AXES], usize), GridError> {
     let mut out = [grid::Axis::linear(0.0, 1.0, 2); MAX_AXES];
     let mut n = 0;
-    for (slot, axis) in out.iter_mut().zip(axes) {
-        *slot = axis.to_grid();
+    for (i, (slot, axis)) in out.iter_mut().zip(axes).enumerate() {
+        *slot = grid::Axis::try_from(axis).map_err(|_| GridError::BadAxis { axis: i as u8 })?;
         n += 1;
     }
-    (out, n)
+    Ok((out, n))
 }
 
 impl Samples for Table<'_> {
