@@ -13,9 +13,10 @@
 
 use std::path::{Path, PathBuf};
 
+use marionette_core::grid::Adjust;
 use marionette_core::table::Table;
 use marionette_host::build::{self, Progress, measure, query, spec};
-use marionette_tests::synth_ref::Rng;
+use marionette_tests::synth_ref::{self as r, Q, Rng, V};
 use serde_json::json;
 
 /// The closed-form field: three segments, positions affine in the
@@ -99,8 +100,8 @@ fn scattered_affine_field_is_reproduced_and_the_mask_follows_the_distance_rule()
     let table = Table::parse(&built.blob).unwrap();
 
     // The mask: a cell is valid iff some example lies within √3/2 cells of
-    // its centre (cell units: parameter × 3). Recomputed here from the
-    // examples.
+    // its centre or of each of its corners (cell units: parameter × 3).
+    // Recomputed here from the examples.
     let cells: Vec<[f64; 3]> = examples
         .iter()
         .map(|e| {
@@ -114,10 +115,15 @@ fn scattered_affine_field_is_reproduced_and_the_mask_follows_the_distance_rule()
             ((c / 3) % 3) as f64 + 0.5,
             (c / 9) as f64 + 0.5,
         ];
-        let near = cells.iter().any(|e| {
-            let d2: f64 = e.iter().zip(&centre).map(|(a, b)| (a - b) * (a - b)).sum();
-            d2 <= 0.75
-        });
+        let near_to = |x: [f64; 3]| {
+            cells.iter().any(|e| {
+                let d2: f64 = e.iter().zip(&x).map(|(a, b)| (a - b) * (a - b)).sum();
+                d2 <= 0.75
+            })
+        };
+        let corners =
+            (0..8).all(|b| near_to([0, 1, 2].map(|i| centre[i] - 0.5 + f64::from(b >> i & 1))));
+        let near = near_to(centre) || corners;
         assert_eq!(table.cell_valid(c), Some(near), "cell {c}");
     }
     assert!((0..27).any(|c| table.cell_valid(c) == Some(false)));
@@ -150,6 +156,153 @@ fn scattered_affine_field_is_reproduced_and_the_mask_follows_the_distance_rule()
         "rotation error {} rad with {method}",
         worst.1
     );
+}
+
+/// An example set with one example at every node of a regular grid with
+/// these axes (`(min, max, count)`): three segments, positions random in
+/// ±1 m, rotations a per-segment base turned by up to 1.2 rad about a random
+/// axis (neighbours up to 2.4 rad apart), random signs. Returns the JSON and
+/// the node poses (`[node][segment]`, axis 0 fastest) as `(V, Q)` with `Q`
+/// as `[x, y, z, w]`.
+fn gridded_set(axes: &[(f64, f64, usize)], seed: u64) -> (serde_json::Value, Vec<Vec<(V, Q)>>) {
+    let mut rng = Rng::new(seed);
+    let base: Vec<Q> = (0..3).map(|_| rng.quat()).collect();
+    let nodes: usize = axes.iter().map(|a| a.2).product();
+    let mut examples = Vec::new();
+    let mut poses = Vec::new();
+    for i in 0..nodes {
+        let mut rest = i;
+        let params: Vec<f64> = axes
+            .iter()
+            .map(|&(lo, hi, n)| {
+                let k = rest % n;
+                rest /= n;
+                lo + (hi - lo) * k as f64 / (n - 1) as f64
+            })
+            .collect();
+        let pose: Vec<(V, Q)> = base
+            .iter()
+            .map(|&b| {
+                let p = [0; 3].map(|_| rng.range(-1.0, 1.0));
+                let axis = [0; 3].map(|_| rng.range(-1.0, 1.0));
+                let q = r::mul(b, r::axis_angle(axis, rng.range(0.0, 1.2)));
+                (p, if rng.unit() < 0.5 { q } else { q.map(|v| -v) })
+            })
+            .collect();
+        let json_pose: Vec<[f64; 7]> = pose
+            .iter()
+            .map(|(p, q)| [p[0], p[1], p[2], q[3], q[0], q[1], q[2]])
+            .collect();
+        examples.push(json!({"params": params, "pose": json_pose}));
+        poses.push(pose);
+    }
+    let names = ["a", "b", "c", "d"];
+    let axes_json: Vec<_> = axes
+        .iter()
+        .zip(names)
+        .map(|(&(lo, hi, n), name)| json!({"name": name, "min": lo, "max": hi, "count": n}))
+        .collect();
+    let set = json!({"segments": ["s0", "s1", "s2"], "axes": axes_json, "examples": examples});
+    (set, poses)
+}
+
+#[test]
+fn gridded_example_sets_keep_every_cell_and_interpolate_their_corners() {
+    // Wiley & Hahn's case: examples captured on a regular grid. Every cell's
+    // corners are examples, so every cell is valid (the old centre-distance
+    // rule lost 6 of the 24 cells of 4×3×5 and all of 3×3×3 to rounding),
+    // and a query inside a cell is the nested lerp/slerp tree over its
+    // corners, to within the table's stated quantization bounds plus the
+    // grid's stated tree bound (1e-5 m, 5e-5 rad; `marionette_core::grid`).
+    let layouts: [&[(f64, f64, usize)]; 5] = [
+        &[(-0.3, 0.7, 5)],
+        &[(0.1, 0.4, 4), (-1.0, 1.3, 3)],
+        &[(-0.4, -0.08, 4), (0.05, 1.75, 3), (-0.15, 0.7, 5)],
+        &[(0.0, 0.3, 3), (-0.3, 0.9, 3), (0.07, 0.91, 3)],
+        &[(0.0, 1.0, 3), (-0.5, 0.5, 2), (0.2, 0.8, 3), (1.0, 2.0, 2)],
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let mut rng = Rng::new(31);
+    for (li, axes) in layouts.iter().enumerate() {
+        let (set, poses) = gridded_set(axes, 40 + li as u64);
+        let path = dir.path().join(format!("grid{li}.json"));
+        std::fs::write(&path, set.to_string()).unwrap();
+        let spec_path = dir.path().join(format!("grid{li}.toml"));
+        std::fs::write(&spec_path, format!("examples = \"grid{li}.json\"\n")).unwrap();
+        let (_, built, _) = load_and_build(&spec_path);
+        let table = Table::parse(&built.blob).unwrap();
+        let cells: usize = axes.iter().map(|a| a.2 - 1).product();
+        let valid = (0..cells)
+            .filter(|&c| table.cell_valid(c) == Some(true))
+            .count();
+        assert_eq!(valid, cells, "layout {li}: valid cells {valid}/{cells}");
+        assert_eq!(built.report.exact, poses.len(), "layout {li}");
+        let bound_p = f64::from(table.header().position_bound) + 1e-5;
+        let bound_q = f64::from(table.header().rotation_bound) + 5e-5;
+        let (mut worst_p, mut worst_q) = (0.0f64, 0.0f64);
+        for c in 0..cells {
+            let mut rest = c;
+            let k: Vec<usize> = axes
+                .iter()
+                .map(|a| {
+                    let k = rest % (a.2 - 1);
+                    rest /= a.2 - 1;
+                    k
+                })
+                .collect();
+            for _ in 0..8 {
+                let t: Vec<f64> = axes.iter().map(|_| rng.range(0.02, 0.98)).collect();
+                let params: Vec<f32> = axes
+                    .iter()
+                    .zip(&k)
+                    .zip(&t)
+                    .map(|((&(lo, hi, n), &k), &t)| {
+                        (lo + (hi - lo) * (k as f64 + t) / (n - 1) as f64) as f32
+                    })
+                    .collect();
+                let s = query::synthesize(&table, &params, None).unwrap();
+                assert_eq!(s.adjust, Adjust::None, "layout {li} cell {c}");
+                // The coefficients the core used, from the parameters it used.
+                let used: Vec<f64> = axes
+                    .iter()
+                    .zip(&k)
+                    .zip(&s.params)
+                    .map(|((&(lo, hi, n), &k), &p)| {
+                        (f64::from(p) - lo) / ((hi - lo) / (n - 1) as f64) - k as f64
+                    })
+                    .collect();
+                for (seg, &(p, q)) in s.pose.iter().enumerate() {
+                    let corners: Vec<(V, Q)> = (0..1usize << axes.len())
+                        .map(|bits| {
+                            let mut node = 0;
+                            let mut stride = 1;
+                            for (a, (&(_, _, n), &ka)) in axes.iter().zip(&k).enumerate() {
+                                node += (ka + (bits >> a & 1)) * stride;
+                                stride *= n;
+                            }
+                            poses[node][seg]
+                        })
+                        .collect();
+                    let (pe, qe) = r::nested_tree(&corners, &used);
+                    let dp = (0..3)
+                        .map(|i| (f64::from(p.to_array()[i]) - pe[i]).abs())
+                        .fold(0.0, f64::max);
+                    let dq = r::angle_between([q.x, q.y, q.z, q.w].map(f64::from), qe);
+                    worst_p = worst_p.max(dp);
+                    worst_q = worst_q.max(dq);
+                }
+            }
+        }
+        println!("layout {li}: {cells} cells, worst {worst_p:e} m, {worst_q:e} rad");
+        assert!(
+            worst_p <= bound_p,
+            "layout {li}: {worst_p:e} m > {bound_p:e}"
+        );
+        assert!(
+            worst_q <= bound_q,
+            "layout {li}: {worst_q:e} rad > {bound_q:e}"
+        );
+    }
 }
 
 /// A one-joint BVH: the arm rotates about X from 0 to `peak` degrees over

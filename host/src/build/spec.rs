@@ -49,7 +49,9 @@
 //!
 //! [resample]
 //! method = "auto"           # auto | idw | rbf | local-linear
-//! # valid_radius = 0.87     # cells; default √p / 2
+//! # valid_radius = 0.87     # cells; a cell is valid when its centre, or each of
+//!                           # its corners, is this close to an example (default √p / 2;
+//!                           # a cell whose corners are all examples is always valid)
 //! # enforce_lengths = true  # W&H limb-length enforcement of each resampled pose
 //! ```
 //!
