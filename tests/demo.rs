@@ -148,7 +148,8 @@ fn highest_hand_frame(recording: &std::path::Path) -> u32 {
 fn the_bundled_recording_is_what_marionette_record_makes() {
     // data/recordings/SOURCE.txt: `marionette record
     // data/hdm05_bk/HDM_bk_grabHighR_007_120.amc --skeleton
-    // data/hdm05_bk/HDM_bk.asf` with the defaults.
+    // data/hdm05_bk/HDM_bk.asf --frame f32` (the f32 frame's rounding:
+    // 0.1 mm, 1e-5) with the other defaults.
     use marionette_host::cmd::record;
     let hdm = repo().join("data/hdm05_bk");
     let motion = record::read_clip(
@@ -187,8 +188,8 @@ fn the_capacity_never_changes_the_output() {
     let host = Region::parse(&inputs.region);
     let board = Region::<FIRMWARE_SEGMENTS>::parse_sized(&inputs.region);
     let (mut s1, mut s2) = (SolverState::new(), SolverState::new());
-    let mut a = Performer::new(&host, &mut s1).unwrap();
-    let mut b = Performer::new(&board, &mut s2).unwrap();
+    let mut a = Performer::new(&host, &mut s1);
+    let mut b = Performer::new(&board, &mut s2);
     let (mut time, mut armed) = (0, false);
     for (k, sent) in inputs.session.iter().enumerate() {
         let (mut ia, mut ib) = (sent.bytes.as_slice(), sent.bytes.as_slice());
@@ -198,7 +199,7 @@ fn the_capacity_never_changes_the_output() {
         while !ib.is_empty() {
             b.receive(&mut ib, sent.time_us, &mut NoCycles);
         }
-        let (pa, pb) = (a.pose(), b.pose());
+        let (pa, pb) = (a.pose().unwrap(), b.pose().unwrap());
         assert_eq!(pa.len(), pb.len());
         for s in 0..pa.len() {
             assert_eq!(pa.positions[s], pb.positions[s], "message {k}, segment {s}");

@@ -33,6 +33,7 @@ use marionette_core::wire::{
     Incoming, List, MAX_FRAME, MAX_SENSORS, Message, PROTOCOL_VERSION, Params, Receiver, Sensor,
     Status, StatusReason, Telemetry, TrackerFrame,
 };
+use marionette_core::wire::{FrameTiming, State, Trip};
 use marionette_host::blob::{self, AxisSpec, TableSpec};
 use marionette_host::import::{EndSites, Motion, amc, bvh};
 use marionette_host::rigfile;
@@ -276,7 +277,7 @@ pub fn wire(data: &[u8]) -> Outcome {
     let mut input = data;
     let mut accepted = 0u32;
     while let Some(incoming) = rx.push_slice(&mut input) {
-        check_incoming(&incoming);
+        check_incoming(&incoming, rx.frame());
         if !matches!(
             incoming,
             Incoming::Hello {
@@ -313,15 +314,18 @@ pub fn wire(data: &[u8]) -> Outcome {
 }
 
 /// The validated invariants of an accepted host message.
-fn check_incoming(incoming: &Incoming) {
+fn check_incoming(incoming: &Incoming, frame: &marionette_core::wire::ValidTrackerFrame) {
     match incoming {
         Incoming::Hello {
             host_version,
             accepted,
-        } => assert_eq!(*accepted, *host_version == PROTOCOL_VERSION),
-        Incoming::Tracker(f) => {
+        } => assert_eq!(
+            *accepted,
+            (wire::MIN_PROTOCOL_VERSION..=PROTOCOL_VERSION).contains(host_version)
+        ),
+        Incoming::Tracker => {
             let mut seen = 0u32;
-            for s in f.sensors() {
+            for s in frame.sensors() {
                 assert!(usize::from(s.id()) < MAX_SENSORS, "sensor id {}", s.id());
                 assert!(seen & (1 << s.id()) == 0, "repeated sensor id {}", s.id());
                 seen |= 1 << s.id();
@@ -553,12 +557,12 @@ pub fn rig_blob(data: &[u8]) -> Outcome {
         reason: StatusReason::NoTable,
     };
     let mut solver = SolverState::new();
-    if let Some(mut p) = Performer::new(&region, &mut solver) {
-        let mut run = Run::new(&p, &rig);
-        run.feed(&mut p, &encode(&Message::Command(arm(1))));
-        assert!(!p.armed(), "a board without a table never arms");
-        run.finish(&mut p);
-    }
+    let mut p = Performer::new(&region, &mut solver);
+    assert!(p.pipeline().is_some(), "a valid rig gives a pipeline");
+    let mut run = Run::new(&p, &rig);
+    run.feed(&mut p, &encode(&Message::Command(arm(1))));
+    assert!(!p.armed(), "a board without a table never arms");
+    run.finish(&mut p);
     Outcome::Accepted
 }
 
@@ -955,7 +959,7 @@ impl Run {
 pub fn performer(data: &[u8]) -> Outcome {
     let region = Region::parse(humanoid16_region());
     let mut solver = SolverState::new();
-    let mut p = Performer::new(&region, &mut solver).expect("the test region has a rig");
+    let mut p = Performer::new(&region, &mut solver);
     let rig = region.rig.as_ref().expect("the test region has a rig");
     assert_eq!(p.reason(), StatusReason::Ok);
     let mut run = Run::new(&p, rig);
@@ -1138,6 +1142,9 @@ fn wire_seeds(out: &mut Vec<(&'static str, String, Vec<u8>)>) {
             reason: StatusReason::Ok,
             errors: ErrorCounters::new(),
             frames_ok: 9,
+            request_seq: Some(4),
+            state: State::Armed,
+            trips: 1,
         }),
         Message::Telemetry(Telemetry {
             seq: 5,
@@ -1145,6 +1152,16 @@ fn wire_seeds(out: &mut Vec<(&'static str, String, Vec<u8>)>) {
             goal_residuals: List::from_slice(&[0.01]).expect("1 residual"),
             stage_counts: [1, 2, 3, 4, 5, 15],
             errors: ErrorCounters::new(),
+            state: State::FailSafe,
+            trips: 2,
+            last_trip: Trip { seq: 5, ticks: 30 },
+            timing: FrameTiming {
+                frames: 10,
+                mean: 1500,
+                worst: 2000,
+                overruns: 1,
+                budget: 1800,
+            },
         }),
         Message::Ack(Ack { seq: 4, ok: true }),
     ];

@@ -168,3 +168,4 @@ pub mod synth_ref {
 /// Fuzz target bodies (shared by `tests/fuzz/` and `tests/fuzz_replay.rs`).
 pub mod fuzz_targets;
 pub mod puppet;
+pub mod servo_bus;

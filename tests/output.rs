@@ -5,7 +5,9 @@
 //! - PCA9685 prescales against a brute-force search for the closest period.
 //! - The bytes each back-end puts on its bus, decoded here from the PCA9685
 //!   register map and the Maestro manual (Set Target through the lead's
-//!   `servo::maestro::decode_set_target`, Set Multiple Targets by hand).
+//!   `servo::maestro::decode_set_target`, Set Multiple Targets by hand), and
+//!   the bus servos' packets from the Dynamixel Protocol 2.0 and Feetech
+//!   manuals.
 //! - Decimation against the UART's capacity: a decimated Maestro never queues
 //!   more bytes than the line can carry.
 
@@ -208,28 +210,20 @@ fn counts_match_the_f64_tick_length_for_every_target() {
     }
 }
 
-/// Decodes a PWM register write into (channel, on, off, full_off).
-fn decode_led(bytes: &[u8]) -> (u8, u16, u16, bool) {
-    let reg = bytes[0];
-    assert!(
-        (0x06..=0x45).contains(&reg),
-        "not an LEDn register: {reg:#x}"
-    );
-    let channel = (reg - 0x06) / 4;
-    match ((reg - 0x06) % 4, bytes.len()) {
-        // LEDn_ON_L .. LEDn_OFF_H with auto-increment.
-        (0, 5) => {
-            let on = u16::from_le_bytes([bytes[1], bytes[2]]);
-            let off = u16::from_le_bytes([bytes[3], bytes[4]]);
-            (channel, on, off & 0x0FFF, off & 0x1000 != 0)
-        }
-        // LEDn_OFF_L, LEDn_OFF_H only.
-        (2, 3) => {
-            let off = u16::from_le_bytes([bytes[1], bytes[2]]);
-            (channel, u16::MAX, off & 0x0FFF, off & 0x1000 != 0)
-        }
-        other => panic!("unexpected write {other:?}: {bytes:x?}"),
-    }
+/// Decodes one auto-increment burst from LED0_ON_L (register 0x06, then
+/// LEDn_ON_L, _ON_H, _OFF_L, _OFF_H for n = 0..16, datasheet §7.3) into
+/// (on, off, full_off) per channel.
+fn decode_burst(bytes: &[u8]) -> Vec<(u16, u16, bool)> {
+    assert_eq!(bytes[0], 0x06, "a burst starts at LED0_ON_L");
+    assert_eq!(bytes.len(), 1 + 16 * 4, "all 16 channels in one burst");
+    bytes[1..]
+        .chunks_exact(4)
+        .map(|c| {
+            let on = u16::from_le_bytes([c[0], c[1]]);
+            let off = u16::from_le_bytes([c[2], c[3]]);
+            (on, off & 0x0FFF, off & 0x1000 != 0)
+        })
+        .collect()
 }
 
 #[test]
@@ -255,18 +249,19 @@ fn pca9685_frames_decode_back_to_their_pulses() {
     }
     let writes = out.release().writes;
     assert!(writes.iter().all(|(a, _)| *a == 0x55));
-    // init: sleep, prescale, wake; then auto-increment once.
+    // init: sleep, prescale, auto-increment, all outputs off, wake.
     assert_eq!(writes[0].1, [0x00, 0x11]);
     assert_eq!(writes[1].1, [0xFE, 101]);
-    assert_eq!(writes[2].1, [0x00, 0x01]);
-    assert_eq!(writes[3].1, [0x00, 0x21]);
-    let mut leds = writes[4..].iter().map(|(_, b)| decode_led(b));
-    for frame in &frames {
-        for (i, &q) in frame.iter().enumerate() {
-            let (ch, on, off, full_off) = leds.next().expect("one write per channel");
-            assert_eq!(usize::from(ch), i);
+    assert_eq!(writes[2].1, [0x00, 0x31]);
+    assert_eq!(writes[3].1, [0xFC, 0x00, 0x10]);
+    assert_eq!(writes[4].1, [0x00, 0x21]);
+    // Then exactly one burst per frame.
+    assert_eq!(writes.len(), 5 + frames.len());
+    for (frame, (_, burst)) in frames.iter().zip(&writes[5..]) {
+        for (i, (on, off, full_off)) in decode_burst(burst).into_iter().enumerate() {
+            let q = frame.get(i).copied().unwrap_or(0);
             if q == 0 {
-                assert!(full_off, "target 0 must switch the channel off");
+                assert!(full_off, "target 0 (or no target) switches channel {i} off");
             } else {
                 assert!(!full_off);
                 assert_eq!(on, 0);
@@ -278,7 +273,6 @@ fn pca9685_frames_decode_back_to_their_pulses() {
             }
         }
     }
-    assert!(leds.next().is_none());
 }
 
 #[test]
@@ -293,9 +287,10 @@ fn pca9685_rejects_what_it_cannot_drive() {
         })
     );
     // Nothing beyond init reached the bus.
-    assert_eq!(out.release().writes.len(), 3);
+    assert_eq!(out.release().writes.len(), 5);
     assert!(Pca9685::new(Bus::default(), 0x40, 49).is_err());
-    assert!(Pca9685::new(Bus::default(), 0x40, 334).is_err());
+    assert!(Pca9685::new(Bus::default(), 0x40, 400).is_ok());
+    assert!(Pca9685::new(Bus::default(), 0x40, 401).is_err());
     assert!(Pca9685::new(Bus::default(), 0x70, 50).is_err());
 }
 

@@ -36,7 +36,10 @@ fn setup_with(frames: u32, noise: bool, failsafe_timeout_ms: Option<u32>) -> Set
     let frames_v = perform::frames(&recording(frames)).unwrap();
     let mut session = perform::session(&frames_v).unwrap();
     if noise {
-        // Random bytes between messages (a small LCG: the inputs, not a result).
+        // Random bytes between messages (a small LCG: the inputs, not a
+        // result), each run closed by a 0x00: a session sends no delimiter
+        // before each frame (each ends in one), so noise not closed by one
+        // would take the next frame with it (see tests/protocol.rs).
         let mut seed = 12345u32;
         for sent in session.iter_mut().skip(2) {
             let mut junk = Vec::new();
@@ -45,6 +48,7 @@ fn setup_with(frames: u32, noise: bool, failsafe_timeout_ms: Option<u32>) -> Set
                 seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
                 junk.push((seed >> 24) as u8);
             }
+            junk.push(0);
             junk.extend_from_slice(&sent.bytes);
             sent.bytes = junk;
         }
@@ -208,7 +212,7 @@ fn a_still_tracker_gives_a_still_figure() {
     let mut poses = Vec::new();
     perform::simulate_with(&region, &session, &mut |p, u| {
         if matches!(u.outputs, Some(marionette_core::frame::Cause::Frame(_))) {
-            poses.push(*p.pose());
+            poses.push(*p.pose().unwrap());
         }
     })
     .unwrap();
@@ -239,14 +243,20 @@ fn a_rig_over_the_capacity_is_refused_as_too_large() {
     let small = Region::<8>::parse_sized(&region);
     assert_eq!(small.reason, StatusReason::RigTooLarge);
     assert!(small.rig.is_none() && small.table.is_none());
-    assert!(Performer::new(&small, &mut SolverState::new()).is_none());
+    let mut solver = SolverState::new();
+    let refused = Performer::new(&small, &mut solver);
+    assert!(refused.pipeline().is_none() && refused.targets().is_empty());
+    assert_eq!(refused.reason(), StatusReason::RigTooLarge);
     let mut fits = Region::<16>::EMPTY;
     fits.parse_into(&region);
     assert_eq!(fits.reason, StatusReason::Ok);
     let mut solver = SolverState::new();
-    let performer = Performer::new(&fits, &mut solver).expect("humanoid16 (13 segments) fits 16");
+    let performer = Performer::new(&fits, &mut solver);
     assert_eq!(
-        performer.pose().len(),
+        performer
+            .pose()
+            .expect("humanoid16 (13 segments) fits 16")
+            .len(),
         13,
         "humanoid16: 13 segments, 16 DOFs"
     );
@@ -255,16 +265,18 @@ fn a_rig_over_the_capacity_is_refused_as_too_large() {
 /// A host stall on the way to the board: the messages from frame 40 on
 /// arrive 150 ms late, so the rig's real 100 ms fail-safe eases the servos
 /// towards rest before frame 40 (modelled natively: the core's own clock
-/// logic, not the replay's forced ticks). The replay of the on-time session
-/// follows that one trip and then matches the stalled outputs bit for bit;
-/// a changed target, or outputs that are no easing, stay mismatches.
+/// logic). The board reports the trip in its telemetry; the replay of the
+/// on-time session follows what it reported and then matches the stalled
+/// outputs bit for bit; a changed target, or outputs scrambled, stay
+/// mismatches, and without the board's report the stall is a mismatch.
 #[test]
-fn the_native_replay_follows_a_failsafe_trip_and_nothing_else() {
+fn the_native_replay_follows_the_trips_the_board_reports() {
     let s = setup_with(120, false, None);
     let mut late = s.session.clone();
     for sent in late.iter_mut().skip(2 + 40) {
         sent.time_us += 150_000;
     }
+    let board = perform::simulate(&s.region, &late).unwrap();
     let stalled = perform::simulate_outputs(&s.region, &late).unwrap();
     let on_time = perform::simulate_outputs(&s.region, &s.session).unwrap();
     let first = (0..stalled.len()).find(|&k| stalled.get(k) != on_time.get(k));
@@ -273,29 +285,126 @@ fn the_native_replay_follows_a_failsafe_trip_and_nothing_else() {
         Some(40),
         "the stall changes the outputs from frame 40"
     );
+    // The board said: one trip, ended by frame 40 (seq 41, after Arm's 0),
+    // 51 fail-safe ticks (from 100 ms to 150 ms after frame 39, 1 ms apart).
+    let trips = perform::reported_trips(&board.replies);
+    assert_eq!(trips.len(), 1, "{trips:?}");
+    assert_eq!(trips[0].seq, 41);
+    assert!((49..=52).contains(&trips[0].ticks), "{trips:?}");
 
-    let followed = perform::follow(&s.region, &s.session, &stalled).unwrap();
+    let followed = perform::follow(&s.region, &s.session, &stalled, &board.replies).unwrap();
     assert_eq!(followed.mismatches, 0);
+    assert_eq!(followed.unplaced, 0);
     let [(message, ticks)] = followed.trips[..] else {
         panic!("one trip expected, got {:?}", followed.trips)
     };
     assert_eq!(message, 2 + 40, "before frame 40 (after Hello and Arm)");
+    assert_eq!(ticks, trips[0].ticks);
     let easing = followed.compared - s.frames;
     assert!(easing > 10, "the stall eased {easing} steps");
     assert_eq!(ticks as usize, easing, "one easing step per tick");
     assert_eq!(followed.run.frame_targets.len(), s.frames);
 
+    let unreported = perform::follow(&s.region, &s.session, &stalled, &[]).unwrap();
+    assert!(unreported.mismatches > 10, "{}", unreported.mismatches);
+
     let mut changed = stalled.clone();
     changed[100][3] ^= 4;
-    let followed = perform::follow(&s.region, &s.session, &changed).unwrap();
+    let followed = perform::follow(&s.region, &s.session, &changed, &board.replies).unwrap();
     assert_eq!(followed.mismatches, 1, "one changed target, one mismatch");
 
     let mut scrambled = stalled.clone();
     scrambled[60..].reverse();
-    let followed = perform::follow(&s.region, &s.session, &scrambled).unwrap();
+    let followed = perform::follow(&s.region, &s.session, &scrambled, &board.replies).unwrap();
     assert!(
         followed.mismatches > 50,
         "{} mismatches",
         followed.mismatches
     );
+}
+
+/// The emulated board reports its own fail-safe trip: the host goes quiet
+/// for 0.4 s after frame 60 (the rig's time-out is 0.1 s). A `Status`
+/// asked for during the silence says `FailSafe`; the `Telemetry` after the
+/// next frame reports the trip ended by it; the native replay that follows
+/// the board's report matches every servo output bit for bit.
+#[test]
+fn the_emulated_board_reports_its_failsafe_trip_and_the_replay_follows_it() {
+    use marionette_core::wire::{Command, CommandKind, Message, State};
+    use marionette_host::qemu;
+    let s = setup_with(150, false, None);
+    let channels = 16;
+    let elf = qemu::build_firmware("perform").unwrap();
+    let config = qemu::Config {
+        tables: Some(s.region_file.path().to_path_buf()),
+        timeout: Duration::from_secs(120),
+        ..qemu::Config::new(elf)
+    };
+    let mut board = qemu::Emulator::start(&config).unwrap();
+    let (head, tail) = s.session.split_at(2 + 60);
+    for sent in head {
+        board.send(&sent.bytes).unwrap();
+    }
+    board.wait_servo_bytes(60 * channels * 4).unwrap();
+    std::thread::sleep(Duration::from_millis(400));
+    // Asked mid-silence: seq 1000 is far ahead; nothing else depends on it.
+    let ask = Message::Command(Command {
+        seq: 1000,
+        kind: CommandKind::RequestStatus,
+    });
+    board.send(&perform::frame_bytes(&ask).unwrap()).unwrap();
+    board
+        .wait_replies(|b| {
+            perform::decode_replies(b)
+                .iter()
+                .any(|m| matches!(m, Message::Status(st) if st.request_seq == Some(1000)))
+        })
+        .unwrap();
+    // The session goes on after a Hello (the board restarts sequence
+    // tracking from the next frame: no gap is counted for seq 1000).
+    let hello = perform::encode(&Message::Hello(marionette_core::wire::Hello {
+        protocol_version: marionette_core::wire::PROTOCOL_VERSION,
+    }))
+    .unwrap();
+    board.send(&hello).unwrap();
+    let (body, last) = tail.split_at(tail.len() - 1);
+    for sent in body {
+        board.send(&sent.bytes).unwrap();
+    }
+    board.wait_servo_bytes(150 * channels * 4).unwrap();
+    board.send(&last[0].bytes).unwrap();
+    let out = board.finish().unwrap();
+    let replies = perform::decode_replies(&out.tracker);
+    let asked = replies.iter().find_map(|m| match m {
+        Message::Status(st) if st.request_seq == Some(1000) => Some(*st),
+        _ => None,
+    });
+    let asked = asked.expect("the RequestStatus is answered");
+    assert_eq!(asked.state, State::FailSafe);
+    assert!(asked.trips >= 1);
+    let trips = perform::reported_trips(&replies);
+    // Frames are seq 1.. (Arm is 0): the first after the silence is seq 61.
+    let trip = trips
+        .iter()
+        .find(|t| t.seq == 61)
+        .expect("the trip is reported");
+    // 0.3 s past the time-out; the emulated loop ticks at most once a ms.
+    assert!((50..=300).contains(&trip.ticks), "{trips:?}");
+    // The native replay of the session as the board saw it, with the
+    // board's trips: RequestStatus and Hello included.
+    let mut seen: Vec<Sent> = head.to_vec();
+    seen.push(Sent {
+        time_us: head.last().unwrap().time_us,
+        bytes: perform::frame_bytes(&ask).unwrap(),
+    });
+    seen.push(Sent {
+        time_us: head.last().unwrap().time_us,
+        bytes: hello,
+    });
+    seen.extend_from_slice(tail);
+    let outputs = perform::decode_maestro(&out.servo, channels);
+    let followed = perform::follow(&s.region, &seen, &outputs, &replies).unwrap();
+    assert_eq!(followed.unplaced, 0);
+    assert!(followed.compared >= 150);
+    assert_eq!(followed.mismatches, 0, "trips {:?}", followed.trips);
 }

@@ -416,7 +416,7 @@ proptest! {
     fn the_fail_safe_always_reaches_rest(acts in prop::collection::vec(act(), 1..40)) {
         let region = Region::parse(fuzz_targets::humanoid16_region());
         let mut solver = SolverState::new();
-        let mut p = Performer::new(&region, &mut solver).expect("rig");
+        let mut p = Performer::new(&region, &mut solver);
         let rig = region.rig.as_ref().expect("rig");
         let mut run = Run::new(&p, rig);
         let mut seq = 0u32;

@@ -129,11 +129,17 @@ fn walk(
             r.byte();
             r.varint();
         }
-        2 => {
+        2 | 3 => {
+            r.varint();
+        }
+        4 => {
+            r.varint();
             r.varint();
         }
         v => panic!("output variant {v}"),
     }
+    let idle = r.varint();
+    assert!(idle <= 1, "idle variant {idle}");
     let seg_start = r.at;
     let n = r.varint();
     let mut segments = Vec::new();
@@ -155,6 +161,7 @@ fn walk(
         let _cal: [f32; 5] = r.floats();
         let _reversed = r.bool();
         let _rest_speed_accel: [f32; 3] = r.floats();
+        let _id = r.byte();
     }
     let params = r.varint() as usize;
     for _ in 0..params {
@@ -216,7 +223,7 @@ fn fnv1a64(bytes: &[u8]) -> u64 {
 /// The description bytes of a blob, checking the envelope by hand.
 fn envelope(b: &[u8]) -> &[u8] {
     assert_eq!(&b[0..4], b"MRIG");
-    assert_eq!(u16::from_le_bytes([b[4], b[5]]), 1);
+    assert_eq!(u16::from_le_bytes([b[4], b[5]]), 2);
     let len = u32::from_le_bytes(b[6..10].try_into().unwrap()) as usize;
     let crc = u32::from_le_bytes(b[10 + len..14 + len].try_into().unwrap());
     assert_eq!(crc, crc32(&b[..10 + len]));
@@ -865,8 +872,11 @@ fn a_zeroed_crc_is_refused() {
     b[10 + len..14 + len].fill(0);
     assert_eq!(Rig::parse(&b).err(), Some(RigError::Crc));
     let mut v = blob("humanoid16.toml");
-    v[4] = 2;
-    assert_eq!(Rig::parse(&v).err(), Some(RigError::Version(2)));
+    v[4] = 3;
+    assert_eq!(Rig::parse(&v).err(), Some(RigError::Version(3)));
+    // A version 1 blob (before the bus servos) is refused by its version.
+    v[4] = 1;
+    assert_eq!(Rig::parse(&v).err(), Some(RigError::Version(1)));
     assert!(RigDesc::from_blob(&blob("cmu31.toml")).is_ok());
 }
 
@@ -1184,4 +1194,213 @@ fn io_errors_name_the_file() {
             .starts_with("/nonexistent/rig.toml: cannot read"),
         "{e}"
     );
+}
+
+// ---------------------------------------------------------------------------
+// Serial bus servos and the idle policy in rig files.
+
+/// A two-servo arm on the given `[output]` and servo keys.
+fn arm_rig(output: &str, servo0: &str, servo1: &str) -> String {
+    format!(
+        r#"name = "arm"
+frame_period_us = 1000
+failsafe_timeout_ms = 100
+[output]
+{output}
+[[segment]]
+name = "base"
+[[segment]]
+name = "upper"
+parent = "base"
+origin = [0, 0.1, 0]
+touch = [0, 0.3, 0]
+dofs = [{{ axis = "z", limits_deg = [-90, 90] }}, {{ axis = "x", limits_deg = [-45, 45] }}]
+[[servo]]
+channel = 0
+joint = "upper"
+axis = "z"
+angle_deg = [-90, 90]
+max_speed = 5
+max_accel = 50
+{servo0}
+[[servo]]
+channel = 1
+joint = "upper"
+axis = "x"
+angle_deg = [-45, 45]
+max_speed = 5
+max_accel = 50
+{servo1}
+"#
+    )
+}
+
+#[test]
+fn bus_servo_positions_come_from_center_units_per_degree_and_limits() {
+    use marionette_core::rig::{FeetechSeries, Idle, Output};
+    let text = arm_rig(
+        "kind = \"dynamixel\"\nbaud = 1000000\nidle = \"off\"",
+        "id = 7\ncenter = 2000",
+        "id = 3\nreversed = true\nlimits = [1900, 4000]",
+    );
+    let rig = rigfile::parse(&text, "arm.toml").unwrap();
+    let d = rig.desc();
+    assert_eq!(d.output, Output::Dynamixel { baud: 1_000_000 });
+    assert_eq!(d.idle, Idle::Off);
+    let (s0, s1) = (d.servos.as_slice()[0], d.servos.as_slice()[1]);
+    // X series default: 4096 units per turn, 11.378 per degree. Servo 0:
+    // 2000 ± 90 · 11.378 = 976 ..= 3024 over the whole ±90°.
+    let per_deg = 4096.0 / 360.0;
+    assert_eq!(s0.id, 7);
+    assert!(
+        (s0.pulse_min_us - (2000.0 - 90.0 * per_deg)).abs() < 0.01,
+        "{s0:?}"
+    );
+    assert!(
+        (s0.pulse_max_us - (2000.0 + 90.0 * per_deg)).abs() < 0.01,
+        "{s0:?}"
+    );
+    assert!((s0.angle_min + std::f32::consts::FRAC_PI_2).abs() < 1e-6);
+    assert!((s0.rest_us - 2000.0).abs() < 0.01);
+    // Servo 1, reversed about the default centre 2048: −45° is
+    // 2048 + 512 = 2560, +45° would be 1536, below the limit 1900: the
+    // range stops at (2048 − 1900) / 11.378 = 13.0° instead.
+    assert_eq!(s1.id, 3);
+    assert!(
+        (s1.pulse_min_us - (2048.0 + 45.0 * per_deg)).abs() < 0.01,
+        "{s1:?}"
+    );
+    assert!((s1.pulse_max_us - 1900.0).abs() < 0.01, "{s1:?}");
+    let limit_deg = (2048.0 - 1900.0) / per_deg;
+    assert!(
+        (s1.angle_max.to_degrees() - limit_deg).abs() < 1e-3,
+        "{s1:?}"
+    );
+    // Beyond the range, the calibration holds the limit.
+    let cal = s1.calibration();
+    assert!((cal.pulse_us(1.0) - 1900.0).abs() < 0.01);
+
+    // Feetech SCS: big-endian, 1024 per 300°, centre 512.
+    let text = arm_rig(
+        "kind = \"feetech\"\nbaud = 1000000\nseries = \"scs\"",
+        "",
+        "",
+    );
+    let scs = rigfile::parse(&text, "arm.toml").unwrap();
+    let d = scs.desc();
+    assert_eq!(
+        d.output,
+        Output::Feetech {
+            baud: 1_000_000,
+            series: FeetechSeries::Scs
+        }
+    );
+    let s0 = d.servos.as_slice()[0];
+    assert_eq!((s0.id, d.servos.as_slice()[1].id), (0, 1));
+    assert!((s0.pulse_max_us - (512.0 + 90.0 * 1024.0 / 300.0)).abs() < 0.01);
+    assert_eq!(d.idle, Idle::Hold);
+    // The blob carries all of it.
+    let blob = rigfile::to_blob(&scs).unwrap();
+    let (back, _) = RigDesc::from_blob(&blob).unwrap();
+    assert_eq!(back.output, d.output);
+    assert_eq!(back.servos.as_slice()[1].id, 1);
+}
+
+#[test]
+fn bad_bus_servo_keys_name_the_field() {
+    let dyn_out = "kind = \"dynamixel\"\nbaud = 1000000";
+    let cases: &[(&str, &str, &str, &str, &str)] = &[
+        (dyn_out, "id = 5", "id = 5", "servo[1].id", "repeats"),
+        (dyn_out, "id = 253", "", "servo[0].id", "out of range"),
+        (
+            dyn_out,
+            "pulse_us = [500, 2500]",
+            "",
+            "servo[0].pulse_us",
+            "not used by a serial bus",
+        ),
+        (
+            dyn_out,
+            "limits = [3500, 4000]",
+            "",
+            "servo[0].limits",
+            "outside the limits",
+        ),
+        (
+            "kind = \"maestro\"\nbaud = 115200",
+            "pulse_us = [500, 2500]\nid = 2",
+            "pulse_us = [500, 2500]",
+            "servo[0].id",
+            "only for a serial bus",
+        ),
+        (
+            "kind = \"maestro\"\nbaud = 115200",
+            "",
+            "pulse_us = [500, 2500]",
+            "servo[0].pulse_us",
+            "missing",
+        ),
+        (
+            "kind = \"maestro\"\nbaud = 115200\nunits_per_degree = 3",
+            "",
+            "",
+            "output.units_per_degree",
+            "not used",
+        ),
+        (
+            "kind = \"feetech\"\nbaud = 1000000\nseries = \"xyz\"",
+            "",
+            "",
+            "output.series",
+            "sts",
+        ),
+        (
+            "kind = \"dynamixel\"\nbaud = 1000000\nidle = \"limp\"",
+            "",
+            "",
+            "output.idle",
+            "hold",
+        ),
+        (
+            "kind = \"dynamixel\"\nbaud = 5000000",
+            "",
+            "",
+            "output.baud",
+            "out of range",
+        ),
+        (
+            "kind = \"dynamixel\"\nbaud = 1000000\nunits_per_degree = -1",
+            "",
+            "",
+            "output.units_per_degree",
+            "> 0",
+        ),
+        (
+            "kind = \"pwm\"\nfreq_hz = 400",
+            "pulse_us = [500, 2500]",
+            "pulse_us = [500, 2500]",
+            "output.freq_hz",
+            "out of range",
+        ),
+        (
+            "kind = \"pca9685\"\nfreq_hz = 400\ni2c_addr = 64",
+            "pulse_us = [500, 2500]",
+            "pulse_us = [500, 2500]",
+            "servo[0].pulse_us",
+            "out of range",
+        ),
+    ];
+    for (output, s0, s1, field, says) in cases {
+        let text = arm_rig(output, s0, s1);
+        match rigfile::parse(&text, "arm.toml") {
+            Ok(_) => panic!("accepted: {output} / {s0} / {s1}"),
+            Err(e) => {
+                let msg = e.to_string();
+                assert!(
+                    msg.contains(field) && msg.contains(says),
+                    "{output} / {s0} / {s1}: {msg}"
+                );
+            }
+        }
+    }
 }

@@ -11,6 +11,7 @@ use marionette_core::wire::{
     List, MAX_FRAME, MAX_PAYLOAD, MAX_SENSORS, Message, PROTOCOL_VERSION, Params, Receiver, Sensor,
     Session, Status, StatusReason, Telemetry, TrackerFrame, WireError, cobs,
 };
+use marionette_core::wire::{FrameTiming, State, Trip};
 use proptest::prelude::*;
 
 // ---------------------------------------------------------------- helpers
@@ -169,12 +170,13 @@ fn ack_exact() {
 
 #[test]
 fn status_exact() {
-    // 04 (Status) 01 (version) 01 (armed) 00 (table_ok false) 04 (BadCrc)
+    // 04 (Status) 02 (version) 01 (armed) 00 (table_ok false) 04 (BadCrc)
     // errors: 01 02 00 00 00 AC 02 00 00 (cobs 1, crc 2, lost 300)
-    // 80 01 (frames_ok 128); crc 0x829923E6.
+    // 80 01 (frames_ok 128); version 2's appended fields: 01 05
+    // (request_seq Some(5)), 02 (state Armed), 03 (trips); crc 0xFD70FA01.
     check_exact(
         Message::Status(Status {
-            protocol_version: 1,
+            protocol_version: 2,
             armed: true,
             table_ok: false,
             reason: StatusReason::BadCrc,
@@ -185,10 +187,13 @@ fn status_exact() {
                 ..ErrorCounters::new()
             },
             frames_ok: 128,
+            request_seq: Some(5),
+            state: State::Armed,
+            trips: 3,
         }),
         &[
-            0x04, 0x04, 0x01, 0x01, 0x04, 0x04, 0x01, 0x02, 0x01, 0x01, 0x03, 0xAC, 0x02, 0x01,
-            0x07, 0x80, 0x01, 0xE6, 0x23, 0x99, 0x82, 0x00,
+            0x04, 0x04, 0x02, 0x01, 0x04, 0x04, 0x01, 0x02, 0x01, 0x01, 0x03, 0xAC, 0x02, 0x01,
+            0x0B, 0x80, 0x01, 0x01, 0x05, 0x02, 0x03, 0x01, 0xFA, 0x70, 0xFD, 0x00,
         ],
     );
 }
@@ -218,6 +223,9 @@ fn status_reason_tags_exact() {
             reason,
             errors: ErrorCounters::new(),
             frames_ok: 0,
+            request_seq: None,
+            state: State::Unready,
+            trips: 0,
         });
         let frame = encode(&msg);
         let mut payload = [0u8; MAX_FRAME];
@@ -232,7 +240,10 @@ fn status_reason_tags_exact() {
 fn telemetry_exact() {
     // 05 (Telemetry) 00 (seq) 01 F0 2E (1 servo: 6000 = 0x1770 → 0xF0, 0x2E)
     // 01 00 00 80 3E (1 residual: 0.25) 01 02 03 04 05 0F (stages)
-    // 00 × 8 (errors); crc 0xECFF8C40.
+    // 00 × 8 (errors); version 2's appended fields: 03 (FailSafe) 02 (trips)
+    // 07 1E (last trip: seq 7, 30 ticks) 0A DC 0B D0 0F 01 88 0E (timing:
+    // 10 frames, mean 1500, worst 2000, 1 overrun, budget 1800);
+    // crc 0xF1F625C1.
     check_exact(
         Message::Telemetry(Telemetry {
             seq: 0,
@@ -240,13 +251,55 @@ fn telemetry_exact() {
             goal_residuals: List::from_slice(&[0.25]).unwrap(),
             stage_counts: [1, 2, 3, 4, 5, 15],
             errors: ErrorCounters::new(),
+            state: State::FailSafe,
+            trips: 2,
+            last_trip: Trip { seq: 7, ticks: 30 },
+            timing: FrameTiming {
+                frames: 10,
+                mean: 1500,
+                worst: 2000,
+                overruns: 1,
+                budget: 1800,
+            },
         }),
         &[
             0x02, 0x05, 0x05, 0x01, 0xF0, 0x2E, 0x01, 0x01, 0x09, 0x80, 0x3E, 0x01, 0x02, 0x03,
-            0x04, 0x05, 0x0F, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x05, 0x40, 0x8C, 0xFF,
-            0xEC, 0x00,
+            0x04, 0x05, 0x0F, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x11, 0x03, 0x02, 0x07,
+            0x1E, 0x0A, 0xDC, 0x0B, 0xD0, 0x0F, 0x01, 0x88, 0x0E, 0xC1, 0x25, 0xF6, 0xF1, 0x00,
         ],
     );
+}
+
+/// The `State` tags are the contract: the payload's last byte but one of a
+/// `Status` with `trips: 0` and no `request_seq`.
+#[test]
+fn state_tags_exact() {
+    let states = [
+        (State::Unready, 0),
+        (State::Disarmed, 1),
+        (State::Armed, 2),
+        (State::FailSafe, 3),
+    ];
+    for (state, tag) in states {
+        let msg = Message::Status(Status {
+            protocol_version: 2,
+            armed: false,
+            table_ok: true,
+            reason: StatusReason::Ok,
+            errors: ErrorCounters::new(),
+            frames_ok: 0,
+            request_seq: None,
+            state,
+            trips: 0,
+        });
+        let mut out = [0u8; MAX_PAYLOAD];
+        let p = wire::encode_payload(&msg, &mut out).unwrap();
+        assert_eq!(
+            p,
+            &[4, 2, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, tag, 0],
+            "{state:?}"
+        );
+    }
 }
 
 #[test]
@@ -272,6 +325,9 @@ fn message_tags_are_the_contract() {
             reason: StatusReason::NoTable,
             errors: ErrorCounters::new(),
             frames_ok: 0,
+            request_seq: None,
+            state: State::Unready,
+            trips: 0,
         }),
         Message::Telemetry(Telemetry {
             seq: 0,
@@ -279,6 +335,10 @@ fn message_tags_are_the_contract() {
             goal_residuals: List::new(),
             stage_counts: [0; 6],
             errors: ErrorCounters::new(),
+            state: State::Unready,
+            trips: 0,
+            last_trip: Trip::default(),
+            timing: FrameTiming::default(),
         }),
         Message::Ack(Ack { seq: 0, ok: false }),
     ];
@@ -351,9 +411,23 @@ fn largest_message_sizes() {
             stale: u32::MAX,
             range: u32::MAX,
         },
+        state: State::FailSafe,
+        trips: u32::MAX,
+        last_trip: Trip {
+            seq: u32::MAX,
+            ticks: u32::MAX,
+        },
+        timing: FrameTiming {
+            frames: u32::MAX,
+            mean: u32::MAX,
+            worst: u32::MAX,
+            overruns: u32::MAX,
+            budget: u32::MAX,
+        },
     });
     let p = wire::encode_payload(&telemetry, &mut out).unwrap();
-    assert_eq!(p.len(), 182);
+    // 182 bytes in version 1, + 1 + 5 + 2 × 5 + 5 × 5 appended in version 2.
+    assert_eq!(p.len(), 223);
     // A buffer one byte short of the frame fails cleanly.
     let frame = encode(&telemetry);
     let mut short = vec![0u8; frame.len() - 1];
@@ -549,14 +623,12 @@ fn sequence_gaps_counted_with_wrap() {
     for seq in [u32::MAX - 2, u32::MAX - 1, 1, 2, 2, 0, 6] {
         stream.extend(encode(&tracker(seq, &s)));
     }
-    let got = feed(&mut rx, &stream);
-    let seqs: Vec<u32> = got
-        .iter()
-        .map(|m| match m {
-            Incoming::Tracker(f) => f.seq(),
-            other => panic!("{other:?}"),
-        })
-        .collect();
+    let mut seqs = Vec::new();
+    let mut input = stream.as_slice();
+    while let Some(m) = rx.push_slice(&mut input) {
+        assert_eq!(m, Incoming::Tracker);
+        seqs.push(rx.frame().seq());
+    }
     assert_eq!(seqs, [u32::MAX - 2, u32::MAX - 1, 1, 2, 6]);
     // MAX-1 → 1 skips MAX and 0 (2 lost); 2 → 6 skips 3, 4, 5 (3 lost).
     assert_eq!(rx.errors().lost, 5);
@@ -643,9 +715,8 @@ fn validation_rejects_bad_values() {
         ],
     );
     let got = feed(&mut rx, &encode(&good));
-    let Incoming::Tracker(f) = got[0] else {
-        panic!("{got:?}")
-    };
+    assert_eq!(got, [Incoming::Tracker]);
+    let f = rx.frame();
     assert_eq!(f.sensors().len(), 3);
     let q = f.sensor(7).unwrap().rotation();
     // [w,x,y,z] = [0, 1.03, 0, 0] renormalised to the unit x quaternion.
@@ -799,21 +870,50 @@ fn arb_message() -> impl Strategy<Value = Message> {
                     range: e[7],
                 },
                 frames_ok: seq,
+                request_seq: ok.then_some(e[0]),
+                state: [
+                    State::Unready,
+                    State::Disarmed,
+                    State::Armed,
+                    State::FailSafe,
+                ][(e[1] % 4) as usize],
+                trips: e[2],
             })
         }),
         (
             any::<u32>(),
             prop::collection::vec(any::<u16>(), 0..=24),
             prop::collection::vec(arb_f32(), 0..=8),
-            any::<[u32; 6]>()
+            any::<[u32; 6]>(),
+            any::<[u32; 8]>()
         )
-            .prop_map(|(seq, s, g, stage_counts)| Message::Telemetry(Telemetry {
-                seq,
-                servo_targets: List::from_slice(&s).unwrap(),
-                goal_residuals: List::from_slice(&g).unwrap(),
-                stage_counts,
-                errors: ErrorCounters::new(),
-            })),
+            .prop_map(
+                |(seq, s, g, stage_counts, x)| Message::Telemetry(Telemetry {
+                    seq,
+                    servo_targets: List::from_slice(&s).unwrap(),
+                    goal_residuals: List::from_slice(&g).unwrap(),
+                    stage_counts,
+                    errors: ErrorCounters::new(),
+                    state: [
+                        State::Unready,
+                        State::Disarmed,
+                        State::Armed,
+                        State::FailSafe
+                    ][(x[0] % 4) as usize],
+                    trips: x[1],
+                    last_trip: Trip {
+                        seq: x[2],
+                        ticks: x[3]
+                    },
+                    timing: FrameTiming {
+                        frames: x[4],
+                        mean: x[5],
+                        worst: x[6],
+                        overruns: x[7],
+                        budget: seq,
+                    },
+                })
+            ),
         (any::<u32>(), any::<bool>()).prop_map(|(seq, ok)| Message::Ack(Ack { seq, ok })),
     ]
 }

@@ -5,7 +5,8 @@
 //! [`Board`], implemented by [`qemu::Qemu`] (emulated `mps2-an386`) and
 //! `blackpill::BlackPill` (STM32F411).
 
-use marionette_core::rig::Output;
+use marionette_core::output::{Refusal, ServoOutput, Support};
+use marionette_core::rig::{Output, ServoDesc};
 
 #[cfg(feature = "qemu")]
 pub mod qemu;
@@ -40,11 +41,26 @@ impl Outcome {
 pub trait Board {
     /// The tracker link: frames in, telemetry out.
     type Tracker: embedded_io::Read + embedded_io::Write + embedded_io::ReadReady;
-    /// The servo bus (for example a Pololu Maestro on a UART).
-    type ServoBus: embedded_io::Write;
+    /// The servo outputs, driving whichever back-end
+    /// [`Board::open_servos`] set up (the core's output abstraction).
+    type Servos: ServoOutput;
 
-    /// Both serial links at once.
-    fn links(&mut self) -> (&mut Self::Tracker, &mut Self::ServoBus);
+    /// The tracker link and the servo outputs at once.
+    fn links(&mut self) -> (&mut Self::Tracker, &mut Self::Servos);
+
+    /// Sets up the servo back-end a rig names (`output`, for its `servos`),
+    /// which [`Board::SUPPORT`] has accepted; writes nothing to the servos
+    /// (they stay as they were at power-up until the first frame after
+    /// arming). `Err` if the board cannot set it up after all.
+    fn open_servos(&mut self, output: &Output, servos: &[ServoDesc]) -> Result<(), Refusal>;
+
+    /// Whether the servo outputs can take a frame now. A board whose servo
+    /// link needs time per frame (a UART, an I2C bus) says no until the last
+    /// one has gone; the app keeps the newest targets meanwhile and sends
+    /// them when it may (the slew limiter still runs every frame).
+    fn servos_ready(&mut self) -> bool {
+        true
+    }
 
     /// The flash-resident table region.
     fn tables(&self) -> &'static [u8];
@@ -52,15 +68,11 @@ pub trait Board {
     /// Microseconds since boot, wrapping at `u32::MAX`.
     fn now_us(&mut self) -> u32;
 
-    /// Whether this board can drive the servo back-end a rig asks for
-    /// (`[output]` in the rig file). The app drives a Pololu Maestro over
-    /// [`Board::ServoBus`]; the on-chip PWM and PCA9685 back-ends of
-    /// `marionette_core::output` need pins no board here wires yet, so a rig
-    /// asking for them is refused: the board does not arm, and its `Status`
-    /// says `Unsupported`.
-    fn supports(&self, output: &Output) -> bool {
-        matches!(output, Output::Maestro { .. })
-    }
+    /// The servo back-ends this board drives (`[output]` in the rig file):
+    /// a rig asking for another is refused (the board does not arm, and its
+    /// `Status` says `Unsupported`). The host checks a region against the
+    /// same description before flashing it.
+    const SUPPORT: Support;
 
     /// Tells the watchdog the loop is alive (no-op where there is none).
     fn feed_watchdog(&mut self);
@@ -68,6 +80,13 @@ pub trait Board {
     /// A free-running cycle counter for the per-stage counts in telemetry
     /// (wrapping; 0 where there is none).
     fn cycles(&mut self) -> u32 {
+        0
+    }
+
+    /// Counts per second of [`Board::cycles`] (0 where there is no
+    /// counter): the rig's frame period in counts is the budget the live
+    /// loop reports overruns against.
+    fn cycles_hz(&self) -> u32 {
         0
     }
 

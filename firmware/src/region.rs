@@ -1,10 +1,11 @@
 //! The flash-resident table region.
 //!
 //! Each board's `memory.x` reserves a `TABLES` region and exports its bounds as
-//! `_tables_start` / `_tables_end`. The host writes a table blob there (QEMU:
-//! `-device loader,file=tables.bin,addr=…`; Black Pill: `marionette flash`), and
-//! the core reads it in place from the byte slice returned by [`tables`]: the
-//! samples are never copied into RAM.
+//! `_tables_start` / `_tables_end`. The host writes a table region there (rig
+//! and tables behind a small directory, `marionette_core::region`; QEMU:
+//! `-device loader,file=region.bin,addr=…`; Black Pill: `marionette flash`),
+//! and the core reads it in place from the byte slice returned by [`tables`]:
+//! the samples are never copied into RAM.
 
 unsafe extern "C" {
     static _tables_start: u8;

@@ -1,27 +1,39 @@
 //! Flashing the board: the firmware ELF into the code region and the table
-//! blob into its own region, with probe-rs.
+//! region (rig + tables, the core's [`marionette_core::region`] layout) into
+//! its own flash, with probe-rs.
 //!
 //! The Black Pill's flash is split by `firmware/boards/blackpill/memory.x`:
 //! sectors 0–5 (`0x0800_0000`, 256 KiB) hold the firmware and sectors 6–7
-//! (`0x0804_0000`, 256 KiB) hold the table blob, so tables can be re-flashed
-//! without touching the code ([`BLACKPILL`]).
+//! (`0x0804_0000`, 256 KiB) hold the table region, so a rig and its tables
+//! can be re-flashed without touching the code ([`BLACKPILL`]).
 //!
 //! Flashing is two steps:
 //!
 //! 1. [`plan`] (no hardware): reads the ELF's loadable segments (what probe-rs
 //!    would program: `PT_LOAD` segments with file data, at their physical
 //!    address), checks that each lies inside the firmware region and none
-//!    touches the table region, checks that the blob fits the table region
-//!    and (unless told not to) that it is a table blob the core accepts.
+//!    touches the table region, checks that the region fits, and (unless
+//!    told not to) reads it **as the board will** ([`check_region`]): the
+//!    256 KiB of the table flash, erased (`FF`) past what is written, parsed
+//!    by the core's [`region::Region`] at the firmware's capacity, and the rig's
+//!    servo output checked against the board's [`Support`]. Anything the
+//!    board would not arm with is refused with the board's reason.
 //!    [`check_chip`] then stages the plan in a probe-rs flash loader for the
 //!    chip's built-in memory map, which catches addresses the chip has no
 //!    flash for, still without a probe.
 //! 2. [`program`]: stages the same chunks on an attached session and commits
 //!    them (erase, program, optional verify), reporting progress through a
-//!    callback. With `dry_run` probe-rs prepares everything (flash algorithm,
-//!    sector layout) and writes nothing.
+//!    callback, then reads the table region back and checks it again as the
+//!    board reads it ([`ReadBack`]). With `dry_run` probe-rs prepares
+//!    everything (flash algorithm, sector layout) and writes nothing; the
+//!    read-back is then the bytes staged in probe-rs' flash loader, laid
+//!    over erased flash.
 
-use marionette_core::table::{Table, TableError};
+use marionette_core::output::{Refusal, Support, support};
+use marionette_core::region::{self, EntryKind, FIRMWARE_SEGMENTS, Layout as RegionLayout};
+use marionette_core::rig::{Rig, RigError};
+use marionette_core::table::{self, Table};
+use marionette_core::wire::StatusReason;
 use object::read::elf::{ElfFile, FileHeader, ProgramHeader};
 use object::{Object, ObjectSection};
 use probe_rs::config::Registry;
@@ -81,8 +93,10 @@ impl fmt::Display for Region {
 pub struct Layout {
     /// The code region.
     pub firmware: Region,
-    /// The table blob's region.
+    /// The table region (rig + tables).
     pub tables: Region,
+    /// The servo back-ends the board drives.
+    pub support: Support,
 }
 
 /// The STM32F411CEU6 "Black Pill" (`firmware/boards/blackpill/memory.x`).
@@ -97,6 +111,7 @@ pub const BLACKPILL: Layout = Layout {
         start: 0x0804_0000,
         size: 256 * 1024,
     },
+    support: Support::BLACKPILL,
 };
 
 /// What a chunk of a plan is.
@@ -109,7 +124,7 @@ pub enum Content {
         /// Names of the sections inside it.
         sections: Vec<String>,
     },
-    /// The table blob.
+    /// The table region (rig + tables).
     Tables,
 }
 
@@ -177,7 +192,10 @@ impl fmt::Display for Plan {
                     format!("ELF segment {segment} [{}]", sections.join(" ")),
                     self.layout.firmware,
                 ),
-                Content::Tables => ("table blob".to_string(), self.layout.tables),
+                Content::Tables => (
+                    "table region (rig + tables)".to_string(),
+                    self.layout.tables,
+                ),
             };
             writeln!(
                 f,
@@ -199,12 +217,12 @@ pub enum FlashError {
     /// Neither firmware nor tables were given.
     #[error("nothing to flash: give a firmware ELF, a table blob, or both")]
     Nothing,
-    /// The blob is empty.
-    #[error("the table blob is empty")]
+    /// The region is empty.
+    #[error("the table region image is empty")]
     EmptyTables,
-    /// The blob does not fit the table region.
+    /// The region does not fit the table flash.
     #[error(
-        "the table blob is {size} bytes but the table region ({region}) holds {} bytes: \
+        "the table region image is {size} bytes but the table region ({region}) holds {} bytes: \
          {} bytes too many",
         region.size,
         size - region.size
@@ -215,9 +233,24 @@ pub enum FlashError {
         /// The table region.
         region: Region,
     },
-    /// The blob is not one the core's reader accepts.
-    #[error("the table blob is not valid: {0}")]
-    BadTables(TableError),
+    /// A bare table blob where a region (rig + tables) belongs.
+    #[error(
+        "this is a bare table blob: the board reads a region of rig + tables, and with a \
+         table alone it would report NoRig; give the rig file too (--rig RIG.toml) or \
+         flash a region (out/region.bin of `marionette demo` or `emulate`)"
+    )]
+    BareTable,
+    /// The board would not arm with this region.
+    #[error("the board would not arm with this region: {reason:?} ({why})")]
+    WouldNotArm {
+        /// The status reason the board would report.
+        reason: StatusReason,
+        /// What is wrong, in detail.
+        why: String,
+    },
+    /// The region read back from the board is not the one written.
+    #[error("read back from the table region: {0}")]
+    ReadBack(Box<FlashError>),
     /// The ELF could not be read.
     #[error("firmware ELF: {0}")]
     Elf(String),
@@ -338,10 +371,125 @@ fn segments_of<H: FileHeader<Endian = object::Endianness>>(
     Ok(out)
 }
 
-/// Checks a table blob: not empty, fits the region, and (if `check`) parses
-/// with the core's reader (magic, version, header, bounds, CRC).
-pub fn check_tables(layout: &Layout, blob: &[u8], check: bool) -> Result<(), FlashError> {
-    let size = blob.len() as u64;
+/// What the board makes of a table region: it arms, with this rig and table.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Armed {
+    /// How the region is laid out.
+    pub layout: RegionLayout,
+    /// The rig's name.
+    pub rig: String,
+    /// Its segments.
+    pub segments: usize,
+    /// Its servo channels.
+    pub servos: usize,
+    /// Its servo back-end, as the rig file names it.
+    pub output: &'static str,
+    /// Table 0's grid, samples per axis.
+    pub grid: Vec<u16>,
+}
+
+impl fmt::Display for Armed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let layout = match self.layout {
+            RegionLayout::Directory(n) => format!("region v{} ({n} entries)", region::VERSION),
+            RegionLayout::Legacy => "older region layout (rig, table)".to_string(),
+            RegionLayout::Unknown => "unknown layout".to_string(),
+        };
+        let grid: Vec<String> = self.grid.iter().map(u16::to_string).collect();
+        write!(
+            f,
+            "{layout}: rig `{}` ({} segments, {} servos on {}), table 0 a {} grid: the board arms",
+            self.rig,
+            self.segments,
+            self.servos,
+            self.output,
+            grid.join("×")
+        )
+    }
+}
+
+/// The table flash as the board sees it: `bytes` at its start, erased
+/// flash (`FF`) after them up to the region's size.
+#[must_use]
+pub fn board_image(layout: &Layout, bytes: &[u8]) -> Vec<u8> {
+    let size = usize::try_from(layout.tables.size).unwrap_or(usize::MAX);
+    let mut image = bytes.to_vec();
+    if image.len() < size {
+        image.resize(size, 0xFF);
+    }
+    image
+}
+
+/// Reads a table region exactly as the board does (the table flash with
+/// `bytes` at its start, erased after them; the core's [`region::Region`] at the
+/// firmware's capacity; the board's [`Support`] for the rig's output) and
+/// says whether it arms, or why not.
+pub fn check_region(layout: &Layout, bytes: &[u8]) -> Result<Armed, FlashError> {
+    if bytes.get(..4) == Some(&table::MAGIC[..]) {
+        return Err(FlashError::BareTable);
+    }
+    let image = board_image(layout, bytes);
+    let region = region::Region::<FIRMWARE_SEGMENTS>::parse_sized(&image);
+    let (Some(rig), Some(table), StatusReason::Ok) = (&region.rig, &region.table, region.reason)
+    else {
+        return Err(FlashError::WouldNotArm {
+            reason: region.reason,
+            why: explain(&image),
+        });
+    };
+    layout
+        .support
+        .check(&rig.output(), rig.servos())
+        .map_err(|r: Refusal| FlashError::WouldNotArm {
+            reason: StatusReason::Unsupported,
+            why: r.to_string(),
+        })?;
+    Ok(Armed {
+        layout: region::layout(&image),
+        rig: rig.name().to_string(),
+        segments: rig.body().len(),
+        servos: rig.servos().len(),
+        output: support::kind_name(&rig.output()),
+        grid: table.axes().iter().map(|a| a.count).collect(),
+    })
+}
+
+/// Why a region does not arm, in words: the first of the directory's, the
+/// rig blob's and the table blob's own errors.
+fn explain(image: &[u8]) -> String {
+    let (rig, table) = match region::directory(image) {
+        Ok(dir) => (
+            dir.find(EntryKind::RIG, 0).map(|e| e.bytes),
+            dir.find(EntryKind::TABLE, 0).map(|e| e.bytes),
+        ),
+        Err(region::RegionError::Magic)
+            if image.get(..4) == Some(&marionette_core::rig::MAGIC[..]) =>
+        {
+            (Some(image), None)
+        }
+        Err(e) => return e.to_string(),
+    };
+    let Some(rig) = rig else {
+        return "the region has no rig entry".into();
+    };
+    match Rig::<FIRMWARE_SEGMENTS>::parse_sized(rig) {
+        Err(RigError::Capacity { segments, capacity }) => {
+            return format!("the rig has {segments} segments; the firmware holds {capacity}");
+        }
+        Err(e) => return format!("the rig blob is refused: {e:?}"),
+        Ok(_) => {}
+    }
+    match table.map(Table::parse) {
+        None => "the region has no table".into(),
+        Some(Err(e)) => format!("table 0: {e}"),
+        Some(Ok(_)) => "table 0 was built for another rig, or is not a static grid".into(),
+    }
+}
+
+/// Checks a table region image: not empty, fits the table flash, and (if
+/// `check`) arms the board ([`check_region`]).
+pub fn check_tables(layout: &Layout, bytes: &[u8], check: bool) -> Result<(), FlashError> {
+    let size = bytes.len() as u64;
     if size == 0 {
         return Err(FlashError::EmptyTables);
     }
@@ -352,14 +500,15 @@ pub fn check_tables(layout: &Layout, blob: &[u8], check: bool) -> Result<(), Fla
         });
     }
     if check {
-        Table::parse(blob).map_err(FlashError::BadTables)?;
+        check_region(layout, bytes)?;
     }
     Ok(())
 }
 
-/// Plans writing `elf` (the firmware ELF's bytes) and `tables` (the blob)
-/// into `layout`, refusing anything that would not fit where it belongs.
-/// `check_blob` also requires the blob to parse as a table.
+/// Plans writing `elf` (the firmware ELF's bytes) and `tables` (a table
+/// region image: rig + tables, [`marionette_core::region`]) into `layout`,
+/// refusing anything that would not fit where it belongs. `check_blob` also
+/// requires the region to arm the board ([`check_region`]).
 pub fn plan(
     layout: &Layout,
     elf: Option<&[u8]>,
@@ -437,13 +586,27 @@ pub fn stage(mut loader: FlashLoader, plan: &Plan, chip: &str) -> Result<FlashLo
 /// Checks a plan against the chip's built-in description without a probe:
 /// the chip must be known and every chunk must lie in its memory.
 pub fn check_chip(plan: &Plan, chip: &str) -> Result<(), FlashError> {
+    staged_loader(plan, chip).map(|_| ())
+}
+
+/// The plan staged in a flash loader for the chip's built-in description.
+fn staged_loader(plan: &Plan, chip: &str) -> Result<FlashLoader, FlashError> {
     let target = Registry::from_builtin_families()
         .get_target_by_name(chip)
         .map_err(|e| FlashError::Chip {
             chip: chip.to_string(),
             reason: e.to_string(),
         })?;
-    stage(target.flash_loader(), plan, chip).map(|_| ())
+    stage(target.flash_loader(), plan, chip)
+}
+
+/// Without a probe: the table region as the board would read it if the
+/// plan were written (the bytes staged in probe-rs' flash loader for the
+/// chip, over erased flash), and whether it arms. `None` if the plan does
+/// not write the table region.
+pub fn dry_read_back(plan: &Plan, chip: &str) -> Result<Option<ReadBack>, FlashError> {
+    let loader = staged_loader(plan, chip)?;
+    read_back(plan, staged_image(&loader, &plan.layout), true)
 }
 
 /// How to [`program`].
@@ -464,15 +627,31 @@ pub fn attach(chip: &str) -> Result<Session, FlashError> {
     Session::auto_attach(chip, config).map_err(|e| FlashError::Probe(chain(&e)))
 }
 
+/// The table region after [`program`]: the bytes the board will read, and
+/// what it makes of them.
+#[derive(Debug)]
+pub struct ReadBack {
+    /// The whole table flash: read from the chip after writing, or (dry run)
+    /// the bytes staged in probe-rs' flash loader over erased flash.
+    pub image: Vec<u8>,
+    /// Whether they are the bytes probe-rs staged rather than read from
+    /// the chip (a dry run).
+    pub staged: bool,
+    /// [`check_region`] on the image: whether the board arms.
+    pub verdict: Result<Armed, FlashError>,
+}
+
 /// Writes a plan through an attached session, reporting progress events to
 /// `progress`. Erases only the sectors written; bytes of a written sector
-/// that the plan does not cover are not kept.
+/// that the plan does not cover are not kept. If the plan writes the table
+/// region, reads it back ([`ReadBack`]) and checks that it holds exactly
+/// the planned bytes.
 pub fn program(
     session: &mut Session,
     plan: &Plan,
     options: Options,
     progress: impl FnMut(ProgressEvent),
-) -> Result<(), FlashError> {
+) -> Result<Option<ReadBack>, FlashError> {
     let chip = session.target().name.clone();
     let loader = stage(session.target().flash_loader(), plan, &chip)?;
     let mut download = DownloadOptions::default();
@@ -481,7 +660,69 @@ pub fn program(
     download.progress = FlashProgress::new(progress);
     loader
         .commit(session, download)
-        .map_err(|e| FlashError::Flash(chain(&e)))
+        .map_err(|e| FlashError::Flash(chain(&e)))?;
+    if !plan.chunks.iter().any(|c| c.content == Content::Tables) {
+        return Ok(None);
+    }
+    let image = if options.dry_run {
+        staged_image(&loader, &plan.layout)
+    } else {
+        read_tables(session, &plan.layout)?
+    };
+    read_back(plan, image, options.dry_run)
+}
+
+/// Checks that `image` (the table flash) starts with the plan's region and
+/// reads it as the board does.
+fn read_back(plan: &Plan, image: Vec<u8>, staged: bool) -> Result<Option<ReadBack>, FlashError> {
+    let Some(written) = plan.chunks.iter().find(|c| c.content == Content::Tables) else {
+        return Ok(None);
+    };
+    if image.get(..written.data.len()) != Some(&written.data[..]) {
+        let at = image
+            .iter()
+            .zip(&written.data)
+            .position(|(a, b)| a != b)
+            .unwrap_or(image.len());
+        return Err(FlashError::ReadBack(Box::new(FlashError::Flash(format!(
+            "byte {at} of the region differs from what was written"
+        )))));
+    }
+    let verdict = check_region(&plan.layout, &image);
+    Ok(Some(ReadBack {
+        image,
+        staged,
+        verdict,
+    }))
+}
+
+/// The table flash as probe-rs' loader would leave it: its staged chunks
+/// inside the table region over erased flash.
+fn staged_image(loader: &FlashLoader, layout: &Layout) -> Vec<u8> {
+    let region = layout.tables;
+    let mut image = board_image(layout, &[]);
+    for (address, data) in loader.data() {
+        for (i, b) in data.iter().enumerate() {
+            let a = address + i as u64;
+            if region.contains(a, 1) {
+                let at = usize::try_from(a - region.start).unwrap_or(usize::MAX);
+                if let Some(slot) = image.get_mut(at) {
+                    *slot = *b;
+                }
+            }
+        }
+    }
+    image
+}
+
+/// Reads the whole table region from the chip.
+fn read_tables(session: &mut Session, layout: &Layout) -> Result<Vec<u8>, FlashError> {
+    let size = usize::try_from(layout.tables.size).unwrap_or(usize::MAX);
+    let mut image = vec![0u8; size];
+    let mut core = session.core(0).map_err(|e| FlashError::Probe(chain(&e)))?;
+    probe_rs::MemoryInterface::read(&mut core, layout.tables.start, &mut image)
+        .map_err(|e| FlashError::ReadBack(Box::new(FlashError::Probe(chain(&e)))))?;
+    Ok(image)
 }
 
 /// An error and its sources, `: `-separated (probe-rs' top-level messages

@@ -8,7 +8,8 @@
 
 use crate::qemu::{self, Config, QemuError};
 use crate::{perform, rigfile};
-use marionette_core::frame::{Performer, Region};
+use marionette_core::frame::Region;
+use marionette_core::perform::Performer;
 use marionette_core::solve::SolverState;
 use serde::Serialize;
 use std::time::Duration;
@@ -173,7 +174,8 @@ pub fn perform_stack(frames: usize) -> Result<Option<u32>, IcountError> {
     let region = bench_region()?;
     // Channels per output frame: as many as the core's loop drives.
     let channels = Performer::new(&Region::parse(&region), &mut SolverState::new())
-        .map_or(0, |p| p.targets().len());
+        .targets()
+        .len();
     let mut file = tempfile::NamedTempFile::new().map_err(QemuError::Io)?;
     std::io::Write::write_all(&mut file, &region).map_err(QemuError::Io)?;
     let (run, _) = perform::emulate(

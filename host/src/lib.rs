@@ -10,6 +10,7 @@ pub mod cmd;
 pub mod flash;
 pub mod icount;
 pub mod import;
+pub mod link;
 pub mod locate;
 pub mod perform;
 pub mod qemu;

@@ -4,30 +4,36 @@
 //!
 //! A session is the byte stream a tracker bridge sends: `Hello`, `Arm`, one
 //! `TrackerFrame` per recorded time step, and finally `Disarm`. The table
-//! region holds the rig blob followed by the table blob at the next 4-byte
-//! boundary ([`region`]), exactly as the firmware reads it.
+//! region holds the rig blob and the table blob behind a small directory
+//! ([`region`], the core's [`marionette_core::region`]), exactly as the
+//! firmware reads it.
 //!
 //! The native run uses each frame's timestamp as the board clock and calls
 //! [`Performer::tick`] at the rig's frame period in the gaps, as the firmware
 //! does with its own clock. The emulated board streams as fast as its UART
 //! takes the bytes, so its clock reaches the fail-safe time-out while frames
 //! are flowing only if the host stalls for longer than that: the board then
-//! rightly eases towards rest until the next frame. [`follow`] replays the
-//! session natively against the board's outputs and follows such trips (it
-//! finds each from the outputs, and keeps it only if the replay then matches
-//! bit for bit); every servo target must be bit-identical between the two.
+//! rightly eases towards rest until the next frame, and reports the trip in
+//! its telemetry (the message that ended it, and how many fail-safe ticks it
+//! lasted). [`follow`] replays the session natively with the trips the board
+//! reported; every servo target must then be bit-identical between the two.
 
 use crate::blob::{self, AxisSpec, BlobError, TableSpec};
 use crate::import::csv::TrackerSample;
 use crate::qemu::{self, Config, QemuError};
 use crate::rigfile::RigFile;
-use marionette_core::frame::{Cause, NoCycles, Performer, Region, Update};
+use marionette_core::frame::NoCycles;
+use marionette_core::output::bus::{self, Protocol};
+use marionette_core::output::{dynamixel, feetech};
+use marionette_core::perform::{Cause, Performer, Update};
+use marionette_core::region::{self, Region};
+use marionette_core::rig::{FeetechSeries, Output as RigOutput};
 use marionette_core::servo::maestro;
 use marionette_core::solve::SolverState;
 use marionette_core::table::{Interp, Kind, Wrap};
 use marionette_core::wire::{
-    self, Command, CommandKind, Hello, List, MAX_FRAME, MAX_SENSORS, Message, PROTOCOL_VERSION,
-    Sensor, TrackerFrame, WireError,
+    self, Command, CommandKind, CompactFrame, Hello, List, MAX_FRAME, MAX_SENSORS, Message,
+    PROTOCOL_VERSION, Sensor, TrackerFrame, Trip, WireError,
 };
 use std::path::Path;
 use std::time::Duration;
@@ -67,14 +73,18 @@ pub enum PerformError {
     },
 }
 
-/// The table region image: the rig blob, zero padding to 4 bytes, the table
-/// blob (if any).
+/// The table region image (the core's [`region::write`]): a directory, the
+/// rig blob and the table blob (if any), exactly as the board reads it.
+/// Empty (a region without a rig) only if the blobs do not fit the format's
+/// 32-bit offsets.
 #[must_use]
 pub fn region(rig_blob: &[u8], table_blob: Option<&[u8]>) -> Vec<u8> {
-    let mut out = rig_blob.to_vec();
-    out.resize(out.len().next_multiple_of(4), 0);
-    if let Some(t) = table_blob {
-        out.extend_from_slice(t);
+    let mut entries = vec![region::Entry::rig(rig_blob)];
+    entries.extend(table_blob.map(region::Entry::table));
+    let mut out = vec![0u8; region::len(&entries).unwrap_or(0)];
+    match region::write(&entries, &mut out) {
+        Ok(n) => out.truncate(n),
+        Err(_) => out.clear(),
     }
     out
 }
@@ -169,17 +179,53 @@ pub struct Sent {
 /// that the board resynchronises even after line noise that did not end in
 /// one (an empty frame is ignored by the receiver).
 pub fn encode(msg: &Message) -> Result<Vec<u8>, PerformError> {
-    let mut buf = [0u8; MAX_FRAME];
-    let frame = wire::encode(msg, &mut buf).map_err(PerformError::Wire)?;
-    let mut out = Vec::with_capacity(frame.len() + 1);
-    out.push(0);
-    out.extend_from_slice(frame);
+    let mut out = vec![0];
+    out.extend(frame_bytes(msg)?);
     Ok(out)
 }
 
-/// The session for a recording: `Hello`, `Arm`, the frames, `Disarm`. The
-/// host's sequence numbers are shared by frames and commands.
+/// Encodes a message as one wire frame (COBS, CRC, delimiter), nothing more.
+pub fn frame_bytes(msg: &Message) -> Result<Vec<u8>, PerformError> {
+    let mut buf = [0u8; MAX_FRAME];
+    let frame = wire::encode(msg, &mut buf).map_err(PerformError::Wire)?;
+    Ok(frame.to_vec())
+}
+
+/// How tracker frames travel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+pub enum Framing {
+    /// The compact frame (tag 7): quantized, 7 + 11 bytes per sensor of
+    /// payload. A frame with a position outside its ±4 m goes as `f32`.
+    #[default]
+    Compact,
+    /// The `f32` frame (tag 1), 29 bytes per sensor.
+    F32,
+}
+
+/// The message carrying `frame` as `framing` says (`f32` where the compact
+/// frame cannot carry it: a position outside ±4 m).
+#[must_use]
+pub fn tracker_message(frame: &TrackerFrame, framing: Framing) -> Message {
+    match framing {
+        Framing::Compact => match CompactFrame::pack(frame) {
+            Ok(c) => Message::CompactFrame(c),
+            Err(_) => Message::TrackerFrame(*frame),
+        },
+        Framing::F32 => Message::TrackerFrame(*frame),
+    }
+}
+
+/// The session for a recording: `Hello`, `Arm`, the frames, `Disarm`, the
+/// tracker frames compact ([`session_with`] chooses). The host's sequence
+/// numbers are shared by frames and commands.
 pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
+    session_with(frames, Framing::Compact)
+}
+
+/// [`session`] with the tracker frames framed as `framing` says. The first
+/// message starts with a `0x00` (the board resynchronises on it); the
+/// others are bare frames, each ending in its delimiter.
+pub fn session_with(frames: &[TrackerFrame], framing: Framing) -> Result<Vec<Sent>, PerformError> {
     let first = frames.first().map_or(0, |f| f.time_us);
     let last = frames.last().map_or(0, |f| f.time_us);
     let n = u32::try_from(frames.len()).unwrap_or(u32::MAX);
@@ -192,7 +238,7 @@ pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
         },
         Sent {
             time_us: first,
-            bytes: encode(&Message::Command(Command {
+            bytes: frame_bytes(&Message::Command(Command {
                 seq: 0,
                 kind: CommandKind::Arm,
             }))?,
@@ -201,7 +247,7 @@ pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
     for f in frames {
         out.push(Sent {
             time_us: f.time_us,
-            bytes: encode(&Message::TrackerFrame(*f))?,
+            bytes: frame_bytes(&tracker_message(f, framing))?,
         });
     }
     let disarm = Command {
@@ -210,7 +256,7 @@ pub fn session(frames: &[TrackerFrame]) -> Result<Vec<Sent>, PerformError> {
     };
     out.push(Sent {
         time_us: last,
-        bytes: encode(&Message::Command(disarm))?,
+        bytes: frame_bytes(&Message::Command(disarm))?,
     });
     Ok(out)
 }
@@ -247,7 +293,8 @@ pub fn pace<E>(
 /// Everything a performance produced.
 #[derive(Clone, Debug, Default)]
 pub struct Run {
-    /// Servo targets (quarter-µs by channel) of each accepted tracker frame.
+    /// Servo targets (quarter-µs by channel; for bus servos, whole
+    /// positions × 4: [`ServoFormat::wire`]) of each accepted tracker frame.
     pub frame_targets: Vec<Vec<u16>>,
     /// Servo targets of each easing step after the frames (fail-safe or
     /// disarm), in order.
@@ -271,7 +318,7 @@ pub fn simulate_with(
     session: &[Sent],
     observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
 ) -> Result<Run, PerformError> {
-    replay(region_bytes, session, &[], observe).map(|(run, _)| run)
+    replay(region_bytes, session, None, observe).map(|(run, _)| run)
 }
 
 /// Every servo output of a native run in the order a board sends them
@@ -280,7 +327,7 @@ pub fn simulate_outputs(
     region_bytes: &[u8],
     session: &[Sent],
 ) -> Result<Vec<Vec<u16>>, PerformError> {
-    let (_, outputs) = replay(region_bytes, session, &[], &mut |_, _| {})?;
+    let (_, outputs) = replay(region_bytes, session, None, &mut |_, _| {})?;
     Ok(outputs.into_iter().map(|o| o.2).collect())
 }
 
@@ -289,37 +336,51 @@ pub fn simulate_outputs(
 /// easing after it), whether a tracker frame drove it, and the targets.
 type Output = (usize, bool, Vec<u16>);
 
-/// [`simulate_with`] with fail-safe trips forced: `trips` holds
-/// `(message index, ticks)`, and each of those ticks runs just before that
-/// message with the board clock at the fail-safe time-out or later (as a
-/// board whose host stalled sees it). Also returns every output in order.
+/// [`simulate_with`], or with the board's fail-safe trips instead of the
+/// replay's own: `trips` holds `(message index, ticks)`, and each of those
+/// ticks runs just before that message with the board clock at the
+/// fail-safe time-out or later (as a board whose host stalled sees it);
+/// while armed the replay's clock then ticks nothing of its own. Also
+/// returns every output in order.
 fn replay(
     region_bytes: &[u8],
     session: &[Sent],
-    trips: &[(usize, u32)],
+    trips: Option<&[(usize, u32)]>,
     observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
 ) -> Result<(Run, Vec<Output>), PerformError> {
     let region = Region::parse(region_bytes);
     let timeout_us = region.rig.as_ref().map_or(0, |r| r.failsafe_timeout_ms());
     let timeout_us = timeout_us.saturating_mul(1000);
     let mut solver = SolverState::new();
-    let mut performer = Performer::new(&region, &mut solver).ok_or(PerformError::NoRig)?;
+    let mut performer = Performer::new(&region, &mut solver);
+    let format = ServoFormat::of_region(region_bytes, performer.targets().len());
+    let wire = |targets: &[u16]| match &format {
+        Some(f) => f.wire(targets),
+        None => targets.to_vec(),
+    };
     let period = performer.frame_period_us().max(1);
     let (mut run, mut outputs) = (Run::default(), Vec::new());
     let mut clock = session.first().map_or(0, |s| s.time_us);
     for (i, sent) in session.iter().enumerate() {
         let mut step = |p: &Performer<'_, '_>, u: Update| {
-            record(&mut run, &mut outputs, i, p, u, observe);
+            record(&mut run, &mut outputs, (i, &wire), p, u, observe);
         };
         // Board-clock ticks in the gap before this message.
         while sent.time_us.wrapping_sub(clock) >= period
             && sent.time_us.wrapping_sub(clock) < u32::MAX / 2
         {
             clock = clock.wrapping_add(period);
-            let update = performer.tick(clock);
-            step(&performer, update);
+            if trips.is_none() || !performer.armed() {
+                let update = performer.tick(clock);
+                step(&performer, update);
+            }
         }
-        let forced = trips.iter().filter(|t| t.0 == i).map(|t| t.1).sum::<u32>();
+        let forced = trips
+            .unwrap_or(&[])
+            .iter()
+            .filter(|t| t.0 == i)
+            .map(|t| t.1)
+            .sum::<u32>();
         for k in 0..forced {
             let late = timeout_us.wrapping_add(k.wrapping_mul(period));
             let update = performer.tick(sent.time_us.wrapping_add(late));
@@ -333,7 +394,7 @@ fn replay(
     }
     // After the session: tick until every servo is at rest (bounded).
     for _ in 0..100_000 {
-        if performer.resting() {
+        if performer.settled() {
             break;
         }
         clock = clock.wrapping_add(period);
@@ -341,7 +402,7 @@ fn replay(
         record(
             &mut run,
             &mut outputs,
-            session.len(),
+            (session.len(), &wire),
             &performer,
             update,
             observe,
@@ -350,10 +411,15 @@ fn replay(
     Ok((run, outputs))
 }
 
+/// The view of targets as the servo link carries them.
+type Wire<'w> = dyn Fn(&[u16]) -> Vec<u16> + 'w;
+
+/// Records one update: `(message, wire)` are the session message it came
+/// from and the view of targets as the servo link carries them.
 fn record(
     run: &mut Run,
     outputs: &mut Vec<Output>,
-    message: usize,
+    (message, wire): (usize, &Wire<'_>),
     performer: &Performer<'_, '_>,
     update: Update,
     observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
@@ -361,7 +427,7 @@ fn record(
     if update.outputs.is_some() || update.reply.is_some() {
         observe(performer, &update);
     }
-    let targets = performer.targets().to_vec();
+    let targets = wire(performer.targets());
     match update.outputs {
         Some(Cause::Frame(_)) => {
             outputs.push((message, true, targets.clone()));
@@ -384,131 +450,299 @@ pub struct Followed {
     /// The native run, with the trips.
     pub run: Run,
     /// The trips followed: `(session message index, ticks)`, each a run of
-    /// easing steps the board took just before that message.
+    /// fail-safe ticks the board reported just before that message.
     pub trips: Vec<(usize, u32)>,
+    /// Trips the board reported that no message of the session ended (not
+    /// followed).
+    pub unplaced: usize,
     /// Outputs compared: up to the last frame-driven one (the easing after
     /// the session is not compared).
     pub compared: usize,
-    /// The outputs compared that still differ from the board's, or that the
+    /// The outputs compared that differ from the board's, or that the
     /// board did not send.
     pub mismatches: usize,
 }
 
-/// Most fail-safe trips [`follow`] looks for.
-const MAX_TRIPS: usize = 64;
-
-/// A replay with these trips, and where its outputs first differ from the
-/// board's (up to its last frame-driven output).
-struct Attempt {
-    run: Run,
-    outputs: Vec<Output>,
-    first: Option<usize>,
+/// The sequence number of each session message that carries one (compact
+/// frames' extended as the board extends them).
+fn session_seqs(session: &[Sent]) -> Vec<Option<u32>> {
+    let mut last = None;
+    session
+        .iter()
+        .map(|sent| {
+            let seq = decode_replies(&sent.bytes)
+                .iter()
+                .find_map(|m| message_seq(m, last));
+            if seq.is_some() {
+                last = seq;
+            }
+            seq
+        })
+        .collect()
 }
 
-fn attempt(
-    region_bytes: &[u8],
-    session: &[Sent],
-    trips: &[(usize, u32)],
-    board: &[Vec<u16>],
-) -> Result<Attempt, PerformError> {
-    let (run, outputs) = replay(region_bytes, session, trips, &mut |_, _| {})?;
-    let span = compared(&outputs);
-    let first = (0..span).find(|&k| board.get(k) != outputs.get(k).map(|o| &o.2));
-    Ok(Attempt {
-        run,
-        outputs,
-        first,
-    })
+/// The host sequence number a message carries, if any.
+fn message_seq(msg: &Message, last: Option<u32>) -> Option<u32> {
+    match msg {
+        Message::TrackerFrame(f) => Some(f.seq),
+        Message::Params(p) => Some(p.seq),
+        Message::Command(c) => Some(c.seq),
+        Message::CompactFrame(c) => Some(wire::compact::extend_seq(last, c.seq16())),
+        _ => None,
+    }
 }
 
-/// The outputs compared: up to the last frame-driven one.
-fn compared(outputs: &[Output]) -> usize {
-    outputs.iter().rposition(|o| o.1).map_or(0, |k| k + 1)
+/// The fail-safe trips the board reported in its telemetry, in order: each
+/// `Telemetry` whose trip count went up carries the last trip that ended
+/// (the board sends one right after the frame that ends a trip).
+#[must_use]
+pub fn reported_trips(replies: &[Message]) -> Vec<Trip> {
+    let mut seen = 0;
+    let mut out = Vec::new();
+    for m in replies {
+        if let Message::Telemetry(t) = m
+            && t.trips > seen
+            && t.last_trip.ticks > 0
+        {
+            seen = t.trips;
+            if out.last() != Some(&t.last_trip) {
+                out.push(t.last_trip);
+            }
+        }
+    }
+    out
 }
 
 /// Replays `session` natively against the board's servo outputs `board`
-/// (all of them, in order), following the board's fail-safe trips.
-///
-/// The board's clock is real: a host that stalls longer than the rig's
-/// fail-safe time-out makes the board ease towards rest in the middle of a
-/// stream, rightly. Where the outputs first differ, the replay tries easing
-/// ticks just before the message that output came from (1, 2, 4, … ticks;
-/// too many show how many); it keeps them only if the replay then matches
-/// the board past the easing and the frame after it, bit for bit. Anything
-/// else is a real mismatch, and counted.
+/// (all of them, in order), following the fail-safe trips the board
+/// reported in `replies` (its telemetry: the message that ended each trip
+/// and how many fail-safe ticks it lasted). The board's clock is real: a
+/// host that stalls longer than the rig's time-out makes it ease towards
+/// rest mid-stream, rightly; the replay runs the same ticks before the same
+/// message and must then match bit for bit. Every output that differs is
+/// a mismatch, and counted.
 pub fn follow(
     region_bytes: &[u8],
     session: &[Sent],
     board: &[Vec<u16>],
+    replies: &[Message],
 ) -> Result<Followed, PerformError> {
+    let seqs = session_seqs(session);
     let mut trips = Vec::new();
-    let mut best = attempt(region_bytes, session, &trips, board)?;
-    while let (Some(k), true) = (best.first, trips.len() < MAX_TRIPS) {
-        let Some(&(message, _, _)) = best.outputs.get(k) else {
-            break;
-        };
-        let at = (message, k, compared(&best.outputs));
-        match trip(region_bytes, session, &trips, board, at)? {
-            Some((ticks, found)) => {
-                trips.push((message, ticks));
-                best = found;
-            }
-            None => break,
+    let mut unplaced = 0;
+    for trip in reported_trips(replies) {
+        match seqs.iter().position(|s| *s == Some(trip.seq)) {
+            Some(i) => trips.push((i, trip.ticks)),
+            None => unplaced += 1,
         }
     }
-    let span = compared(&best.outputs);
-    let differ = (0..span)
-        .filter(|&k| board.get(k) != best.outputs.get(k).map(|o| &o.2))
+    let (run, outputs) = replay(region_bytes, session, Some(&trips), &mut |_, _| {})?;
+    let span = outputs.iter().rposition(|o| o.1).map_or(0, |k| k + 1);
+    let mismatches = (0..span)
+        .filter(|&k| board.get(k) != outputs.get(k).map(|o| &o.2))
         .count();
     Ok(Followed {
-        run: best.run,
+        run,
         trips,
+        unplaced,
         compared: span,
-        mismatches: differ,
+        mismatches,
     })
 }
 
-/// The easing ticks before `message` that make the replay match the board
-/// at output `k` and past it, with that replay; `None` if there are none.
-/// `base`: the outputs compared without them.
-fn trip(
-    region_bytes: &[u8],
-    session: &[Sent],
-    trips: &[(usize, u32)],
-    board: &[Vec<u16>],
-    (message, k, base): (usize, usize, usize),
-) -> Result<Option<(u32, Attempt)>, PerformError> {
-    let with = |ticks: u32| {
-        let mut t = trips.to_vec();
-        t.push((message, ticks));
-        attempt(region_bytes, session, &t, board)
-    };
-    let mut ticks = 1u32;
-    while ticks <= 1 << 16 {
-        let a = with(ticks)?;
-        // Easing outputs the ticks added before the frame.
-        let added = compared(&a.outputs).saturating_sub(base);
-        match a.first {
-            // Past the easing and the frame after it: found.
-            None => return Ok(Some((ticks, a))),
-            Some(j) if j > k + added => return Ok(Some((ticks, a))),
-            // Every easing step matched, the frame did not: more.
-            Some(j) if j == k + added => ticks *= 2,
-            // Too many: the board's frame came after `j − k` steps.
-            Some(j) => {
-                let exact = u32::try_from(j.saturating_sub(k)).unwrap_or(0);
-                if exact == 0 || exact >= ticks {
-                    return Ok(None);
-                }
-                let a = with(exact)?;
-                let past = a
-                    .first
-                    .is_none_or(|j| j > k + usize::try_from(exact).unwrap_or(0));
-                return Ok(past.then_some((exact, a)));
+/// What the emulated board's servo link carries for a region's rig.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ServoFormat {
+    /// Pololu Maestro Set Target commands, `channels` per output.
+    Maestro {
+        /// Channels per output frame.
+        channels: usize,
+    },
+    /// Bus servo Sync Writes ([`marionette_core::output::bus`]).
+    Bus {
+        /// The packet format.
+        protocol: Protocol,
+        /// The bus id of each channel (`None`: no servo).
+        ids: Vec<Option<u8>>,
+    },
+}
+
+impl ServoFormat {
+    /// The format of a region's rig, `channels` per output frame (`None`
+    /// without a rig, or for an output that is not on a UART).
+    #[must_use]
+    pub fn of_region(region_bytes: &[u8], channels: usize) -> Option<Self> {
+        let region = Region::parse(region_bytes);
+        let rig = region.rig.as_ref()?;
+        let mut ids = vec![None; channels];
+        for s in rig.servos() {
+            if let Some(slot) = ids.get_mut(usize::from(s.channel)) {
+                *slot = Some(s.id);
+            }
+        }
+        match rig.output() {
+            RigOutput::Maestro { .. } => Some(Self::Maestro { channels }),
+            RigOutput::Dynamixel { .. } => Some(Self::Bus {
+                protocol: Protocol::Dynamixel,
+                ids,
+            }),
+            RigOutput::Feetech { series, .. } => Some(Self::Bus {
+                protocol: Protocol::Feetech(series),
+                ids,
+            }),
+            RigOutput::Pwm { .. } | RigOutput::Pca9685 { .. } => None,
+        }
+    }
+
+    /// At least how many bytes `frames` frame-driven outputs put on the
+    /// link.
+    #[must_use]
+    pub fn bytes_for(&self, frames: usize) -> usize {
+        match self {
+            Self::Maestro { channels } => frames * channels * 4,
+            Self::Bus { protocol, ids } => {
+                let n = ids.iter().flatten().count();
+                frames * protocol.frame_bytes(n)
             }
         }
     }
-    Ok(None)
+
+    /// The targets as they go on the link: a bus servo's position is
+    /// whole, so its quarter units are rounded to a multiple of 4.
+    #[must_use]
+    pub fn wire(&self, targets: &[u16]) -> Vec<u16> {
+        match self {
+            Self::Maestro { .. } => targets.to_vec(),
+            Self::Bus { .. } => targets
+                .iter()
+                .map(|&q| bus::position(q).saturating_mul(4))
+                .collect(),
+        }
+    }
+
+    /// Splits the link's bytes into output frames of targets by channel
+    /// (bus positions as quarter units: `position · 4`).
+    #[must_use]
+    pub fn decode(&self, bytes: &[u8]) -> Vec<Vec<u16>> {
+        match self {
+            Self::Maestro { channels } => decode_maestro(bytes, *channels),
+            Self::Bus { protocol, ids } => decode_bus(*protocol, ids, bytes),
+        }
+    }
+}
+
+/// Bus servo packets as output frames: each Goal Position Sync Write is a
+/// frame (servos without a position: 0), and a Torque Enable = 0 to every
+/// servo that no Goal Position follows is a frame of zeros (the release).
+fn decode_bus(protocol: Protocol, ids: &[Option<u8>], bytes: &[u8]) -> Vec<Vec<u16>> {
+    let (torque_at, goal_at) = match protocol {
+        Protocol::Dynamixel => (dynamixel::TORQUE_ENABLE, dynamixel::GOAL_POSITION),
+        Protocol::Feetech(_) => (
+            u16::from(feetech::TORQUE_ENABLE),
+            u16::from(feetech::GOAL_POSITION),
+        ),
+    };
+    let packets = bus_packets(protocol, bytes);
+    let mut frames = Vec::new();
+    for (i, (address, items)) in packets.iter().enumerate() {
+        let next_is_goal = packets.get(i + 1).is_some_and(|(a, _)| *a == goal_at);
+        if *address == goal_at {
+            let mut frame = vec![0u16; ids.len()];
+            for (id, value) in items {
+                if let Some(ch) = ids.iter().position(|x| *x == Some(*id)) {
+                    frame[ch] = value.saturating_mul(4);
+                }
+            }
+            frames.push(frame);
+        } else if *address == torque_at
+            && !next_is_goal
+            && items.iter().all(|(_, v)| *v == 0)
+            && items.len() == ids.iter().flatten().count()
+        {
+            frames.push(vec![0u16; ids.len()]);
+        }
+    }
+    frames
+}
+
+/// The Sync Writes in a byte stream: (address, (id, value)…), values of
+/// one byte or a 2/4-byte position in the bus' byte order. Stops at the
+/// first byte that does not start a valid packet.
+fn bus_packets(protocol: Protocol, mut bytes: &[u8]) -> Vec<(u16, Vec<(u8, u16)>)> {
+    let mut out = Vec::new();
+    loop {
+        let parsed = match protocol {
+            Protocol::Dynamixel => dynamixel_packet(bytes),
+            Protocol::Feetech(series) => feetech_packet(series, bytes),
+        };
+        let Some((packet, rest)) = parsed else {
+            return out;
+        };
+        out.push(packet);
+        bytes = rest;
+    }
+}
+
+type Packet = (u16, Vec<(u8, u16)>);
+
+/// One Protocol 2.0 Sync Write (no stuffing: positions never need it).
+fn dynamixel_packet(b: &[u8]) -> Option<(Packet, &[u8])> {
+    if b.get(..5)? != [0xFF, 0xFF, 0xFD, 0x00, 0xFE] {
+        return None;
+    }
+    let len = usize::from(u16::from_le_bytes([*b.get(5)?, *b.get(6)?]));
+    let end = 7 + len;
+    let packet = b.get(..end)?;
+    let crc = u16::from_le_bytes([*packet.get(end - 2)?, *packet.get(end - 1)?]);
+    if dynamixel::crc16(packet.get(..end - 2)?) != crc || *packet.get(7)? != dynamixel::SYNC_WRITE {
+        return None;
+    }
+    let address = u16::from_le_bytes([*packet.get(8)?, *packet.get(9)?]);
+    let data_len = usize::from(u16::from_le_bytes([*packet.get(10)?, *packet.get(11)?]));
+    let items = packet
+        .get(12..end - 2)?
+        .chunks_exact(data_len + 1)
+        .map(|c| {
+            let mut v = [0u8; 4];
+            for (d, s) in v.iter_mut().zip(c.get(1..).unwrap_or(&[])) {
+                *d = *s;
+            }
+            (c[0], u32::from_le_bytes(v).min(u32::from(u16::MAX)) as u16)
+        })
+        .collect();
+    Some(((address, items), b.get(end..)?))
+}
+
+/// One Feetech Sync Write.
+fn feetech_packet(series: FeetechSeries, b: &[u8]) -> Option<(Packet, &[u8])> {
+    if b.get(..3)? != [0xFF, 0xFF, 0xFE] {
+        return None;
+    }
+    let len = usize::from(*b.get(3)?);
+    let end = 4 + len;
+    let packet = b.get(..end)?;
+    let sum = packet
+        .get(2..end - 1)?
+        .iter()
+        .fold(0u8, |s, &x| s.wrapping_add(x));
+    if !sum != *packet.get(end - 1)? || *packet.get(4)? != feetech::SYNC_WRITE {
+        return None;
+    }
+    let address = u16::from(*packet.get(5)?);
+    let data_len = usize::from(*packet.get(6)?);
+    let items = packet
+        .get(7..end - 1)?
+        .chunks_exact(data_len + 1)
+        .map(|c| {
+            let value = match (data_len, series) {
+                (2, FeetechSeries::Sts) => u16::from_le_bytes([c[1], c[2]]),
+                (2, FeetechSeries::Scs) => u16::from_be_bytes([c[1], c[2]]),
+                _ => u16::from(c[1]),
+            };
+            (c[0], value)
+        })
+        .collect();
+    Some(((address, items), b.get(end..)?))
 }
 
 /// Runs a session on the emulated board with `region_file` in its table
@@ -517,7 +751,8 @@ fn trip(
 /// `frames` the number of frame-driven outputs expected. Messages are sent as
 /// `pacing` says; the last one (the `Disarm`) is sent after the board has
 /// answered every frame and a further `pause` (a pause longer than the
-/// fail-safe time-out exercises it).
+/// fail-safe time-out exercises it). The servo link is decoded by the rig's
+/// output ([`ServoFormat`]).
 pub fn emulate(
     region_file: &Path,
     session: &[Sent],
@@ -526,6 +761,12 @@ pub fn emulate(
     pacing: Pacing,
     pause: Duration,
 ) -> Result<(Run, Vec<u8>), PerformError> {
+    let region_bytes = std::fs::read(region_file).map_err(|source| PerformError::Io {
+        path: region_file.display().to_string(),
+        source,
+    })?;
+    let format = ServoFormat::of_region(&region_bytes, channels)
+        .unwrap_or(ServoFormat::Maestro { channels });
     let elf = qemu::build_firmware("perform")?;
     let config = Config {
         tables: Some(region_file.to_path_buf()),
@@ -536,13 +777,13 @@ pub fn emulate(
     let (body, last) = session.split_at(session.len().saturating_sub(1));
     pace(body, pacing, |bytes| emulator.send(bytes))?;
     // Let the board finish the frames before it is told to stop.
-    emulator.wait_servo_bytes(frames * channels * 4)?;
+    emulator.wait_servo_bytes(format.bytes_for(frames))?;
     std::thread::sleep(pause);
     for sent in last {
         emulator.send(&sent.bytes)?;
     }
     let out = emulator.finish()?;
-    let mut targets = decode_maestro(&out.servo, channels);
+    let mut targets = format.decode(&out.servo);
     let rest = targets.split_off(frames.min(targets.len()));
     let replies = decode_replies(&out.tracker);
     Ok((

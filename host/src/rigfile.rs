@@ -24,9 +24,13 @@
 //! root_position = [0, 0.44, 0]   # rest placement of the root, m (default 0)
 //! root_rotation = [1, 0, 0, 0]   # (default identity)
 //!
-//! [output]                       # kind = "pwm" (freq_hz) | "pca9685" (i2c_addr, freq_hz)
-//! kind = "maestro"               #      | "maestro" (baud)
+//! [output]                       # kind = "pwm" (freq_hz 50-333) | "pca9685" (i2c_addr, freq_hz 50-400)
+//! kind = "maestro"               #      | "maestro" (baud) | "dynamixel" (baud) | "feetech" (baud, series)
 //! baud = 115200
+//! idle = "hold"                  # at rest after a disarm or fail-safe: "hold" (default) | "off"
+//! # Serial bus servos (dynamixel, feetech) take positions, not pulses:
+//! # units_per_degree = 11.3778   # default 4096/360 (Dynamixel X, Feetech STS); SCS 1024/300
+//! # series = "sts"               # feetech only: "sts" (little-endian, default) | "scs" (big-endian)
 //!
 //! [[segment]]                    # root first, parents before children
 //! name = "pelvis"                # ≤ 24 bytes, unique; the root has no parent and no dofs
@@ -48,6 +52,12 @@
 //! rest_us = 1500                 # default: the pulse of the rest angle
 //! max_speed = 5.5                # rad/s
 //! max_accel = 50                 # rad/s²
+//! # A serial bus servo instead of pulse_us, trim_us and rest_us:
+//! # id = 3                       # its id on the bus (default: the channel)
+//! # center = 2048                # position at joint angle 0 (default: mid-travel, 2048; SCS 512)
+//! # limits = [1024, 3072]        # positions it may take (default: 1 ..= 4095; SCS 1 ..= 1023)
+//! # rest = 2048                  # default: the position of the rest angle
+//! # position = center ± angle · units_per_degree (− when reversed), within limits
 //!
 //! [[param]]                      # params[param] = offset + scale * measure
 //! param = 0
@@ -96,9 +106,9 @@ use std::path::{Path, PathBuf};
 
 use marionette_core::pose::NO_PARENT;
 use marionette_core::rig::{
-    AxisName, Cylinder, DofDesc, GoalMap, GoalSource, Invalid, MAX_GOALS, MAX_PARAMS, MAX_SEGMENTS,
-    MAX_SENSORS, MAX_SERVOS, Measure, Output, ParamMap, Place, Problem, RefFrame, RigDesc,
-    RigError, SegmentDesc, SensorGoal, ServoDesc,
+    AxisName, Cylinder, DofDesc, FeetechSeries, GoalMap, GoalSource, Idle, Invalid, MAX_GOALS,
+    MAX_PARAMS, MAX_SEGMENTS, MAX_SENSORS, MAX_SERVOS, Measure, Output, ParamMap, Place, Problem,
+    RefFrame, RigDesc, RigError, SegmentDesc, SensorGoal, ServoDesc,
 };
 use marionette_core::servo::Calibration;
 use marionette_core::wire::List;
@@ -303,6 +313,9 @@ struct RawOutput {
     freq_hz: Option<S<u16>>,
     i2c_addr: Option<S<u8>>,
     baud: Option<S<u32>>,
+    idle: Option<S<String>>,
+    series: Option<S<String>>,
+    units_per_degree: Option<S<f32>>,
 }
 
 #[derive(Deserialize)]
@@ -331,12 +344,16 @@ struct RawServo {
     axis: S<String>,
     angle: Option<S<[f32; 2]>>,
     angle_deg: Option<S<[f32; 2]>>,
-    pulse_us: S<[f32; 2]>,
+    pulse_us: Option<S<[f32; 2]>>,
     trim_us: Option<S<f32>>,
     reversed: Option<bool>,
     rest_us: Option<S<f32>>,
     max_speed: S<f32>,
     max_accel: S<f32>,
+    id: Option<S<u8>>,
+    center: Option<S<f32>>,
+    limits: Option<S<[f32; 2]>>,
+    rest: Option<S<f32>>,
 }
 
 #[derive(Deserialize)]
@@ -583,11 +600,13 @@ fn describe(i: &Invalid) -> String {
     let hint = match i.field {
         "frame_period_us" => " (100 ..= 100000 µs)",
         "failsafe_timeout_ms" => " (1 ..= 60000 ms, and at least one frame period)",
-        "freq_hz" => " (pwm: 1 ..= 1000 Hz; pca9685: 24 ..= 1526 Hz)",
-        "i2c_addr" => " (a 7-bit address, ≤ 0x7F)",
-        "baud" => " (300 ..= 250000)",
+        "freq_hz" => " (pwm: 50 ..= 333 Hz; pca9685: 50 ..= 400 Hz)",
+        "i2c_addr" => " (a 7-bit address 0x08 ..= 0x7F, not 0x70)",
+        "baud" => {
+            " (maestro 300 ..= 250000, dynamixel 9600 ..= 4500000, feetech 38400 ..= 1000000)"
+        }
         "channel" => " (below the output's channel count: 16 for pca9685, 24 otherwise)",
-        "pulse_us" => " (1 ..= 4000 µs, two different values)",
+        "pulse_us" => " (1 ..= 4000 µs and shorter than the PWM period, two different values)",
         "trim_us" => " (±1000 µs)",
         "rest_us" => " (within pulse_us)",
         "max_speed" | "max_accel" => " (must be > 0)",
@@ -623,6 +642,7 @@ pub fn parse(text: &str, file: &str) -> Result<RigFile, RigFileError> {
         src: &src,
         spans: Spans::default(),
         names: Vec::new(),
+        bus: None,
     }
     .build(raw)
 }
@@ -631,6 +651,19 @@ struct Builder<'s, 't> {
     src: &'s Source<'t>,
     spans: Spans,
     names: Vec<String>,
+    /// The position scale of a serial bus output (`None`: pulses).
+    bus: Option<BusScale>,
+}
+
+/// How a serial bus output turns joint angles into positions.
+#[derive(Clone, Copy, Debug)]
+struct BusScale {
+    /// Position units per radian.
+    per_rad: f32,
+    /// The default position at joint angle 0.
+    center: f32,
+    /// The default position limits.
+    limits: [f32; 2],
 }
 
 fn axis_name(s: &str) -> Option<AxisName> {
@@ -727,6 +760,8 @@ impl Builder<'_, '_> {
     fn build(mut self, raw: RawRig) -> Result<RigFile, RigFileError> {
         let output = self.output(&raw.output)?;
         let mut desc = RigDesc::new("", output);
+        desc.idle = self.idle(&raw.output)?;
+        self.bus = self.bus_scale(&raw.output, &output)?;
         let r = Place::Rig;
         self.spans.field(r, "name", &raw.name);
         self.spans.field(r, "frame_period_us", &raw.frame_period_us);
@@ -791,6 +826,15 @@ impl Builder<'_, '_> {
 
     fn core_err(&self, e: RigError) -> RigFileError {
         match e {
+            RigError::Invalid(i) if self.bus.is_some() && i.field == "pulse_us" => {
+                let (span, field) = self.spans.locate(&i);
+                let field = field.replace("pulse_us", "limits");
+                let message = match i.problem {
+                    Problem::Unordered => "the angle range maps to a single position".into(),
+                    _ => "positions out of range (1 ..= 4095)".to_string(),
+                };
+                self.src.err(&span, field, message)
+            }
             RigError::Invalid(i) => {
                 let (span, field) = self.spans.locate(&i);
                 self.src.err(&span, field, describe(&i))
@@ -857,12 +901,112 @@ impl Builder<'_, '_> {
                     baud: need(raw.baud.as_ref(), "baud")?,
                 })
             }
+            "dynamixel" => {
+                unused(span(&freq), "freq_hz")?;
+                unused(span(&addr), "i2c_addr")?;
+                Ok(Output::Dynamixel {
+                    baud: need(raw.baud.as_ref(), "baud")?,
+                })
+            }
+            "feetech" => {
+                unused(span(&freq), "freq_hz")?;
+                unused(span(&addr), "i2c_addr")?;
+                Ok(Output::Feetech {
+                    baud: need(raw.baud.as_ref(), "baud")?,
+                    series: self.series(raw.series.as_ref())?,
+                })
+            }
             other => Err(self.err(
                 &raw.kind,
                 "output.kind",
-                format!("expected \"pwm\", \"pca9685\" or \"maestro\", found {other:?}"),
+                format!(
+                    "expected \"pwm\", \"pca9685\", \"maestro\", \"dynamixel\" or \"feetech\", \
+                     found {other:?}"
+                ),
             )),
         }
+    }
+
+    /// `output.series` of a Feetech output.
+    fn series(&self, v: Option<&S<String>>) -> Result<FeetechSeries, RigFileError> {
+        match v.map(|v| (v, v.get_ref().as_str())) {
+            None | Some((_, "sts")) => Ok(FeetechSeries::Sts),
+            Some((_, "scs")) => Ok(FeetechSeries::Scs),
+            Some((v, other)) => Err(self.err(
+                v,
+                "output.series",
+                format!("expected \"sts\" or \"scs\", found {other:?}"),
+            )),
+        }
+    }
+
+    /// `output.idle`.
+    fn idle(&self, o: &S<RawOutput>) -> Result<Idle, RigFileError> {
+        match o.get_ref().idle.as_ref().map(|v| (v, v.get_ref().as_str())) {
+            None | Some((_, "hold")) => Ok(Idle::Hold),
+            Some((_, "off")) => Ok(Idle::Off),
+            Some((v, other)) => Err(self.err(
+                v,
+                "output.idle",
+                format!("expected \"hold\" or \"off\", found {other:?}"),
+            )),
+        }
+    }
+
+    /// The position scale of a bus output (`units_per_degree` and the
+    /// servo family's defaults); `None` for the pulse outputs, which take
+    /// neither `units_per_degree` nor `series`.
+    fn bus_scale(
+        &self,
+        o: &S<RawOutput>,
+        output: &Output,
+    ) -> Result<Option<BusScale>, RigFileError> {
+        let raw = o.get_ref();
+        if !output.is_bus() {
+            let key = match (&raw.units_per_degree, &raw.series) {
+                (Some(v), _) => Some((v.span(), "units_per_degree")),
+                (None, Some(v)) => Some((v.span(), "series")),
+                (None, None) => None,
+            };
+            return match key {
+                Some((span, key)) => Err(self.src.err(
+                    &span,
+                    format!("output.{key}"),
+                    format!("not used by output kind {:?}", raw.kind.get_ref()),
+                )),
+                None => Ok(None),
+            };
+        }
+        if raw.series.is_some() && matches!(output, Output::Dynamixel { .. }) {
+            let v = raw.series.as_ref().map(S::span).unwrap_or(0..0);
+            return Err(self
+                .src
+                .err(&v, "output.series", "not used by output kind \"dynamixel\""));
+        }
+        let scs = matches!(
+            output,
+            Output::Feetech {
+                series: FeetechSeries::Scs,
+                ..
+            }
+        );
+        let (per_degree, center, top) = if scs {
+            (1024.0 / 300.0, 512.0, 1023.0)
+        } else {
+            (4096.0 / 360.0, 2048.0, 4095.0)
+        };
+        let per_degree = match &raw.units_per_degree {
+            Some(v) if v.get_ref().is_finite() && *v.get_ref() > 0.0 => *v.get_ref(),
+            Some(v) => {
+                return Err(self.err(v, "output.units_per_degree", "must be a finite number > 0"));
+            }
+            None => per_degree,
+        };
+        Ok(Some(BusScale {
+            per_rad: per_degree / DEG,
+            center,
+            limits: [1.0, top],
+        }))
     }
 
     fn segment_desc(
@@ -975,9 +1119,12 @@ impl Builder<'_, '_> {
             self.spans.field(p, "channel", &v.channel);
             self.spans.field(p, "joint", &v.joint);
             self.spans.field(p, "axis", &v.axis);
-            self.spans.field(p, "pulse_us", &v.pulse_us);
+            self.spans.opt(p, "pulse_us", &v.pulse_us);
             self.spans.opt(p, "trim_us", &v.trim_us);
             self.spans.opt(p, "rest_us", &v.rest_us);
+            self.spans.opt(p, "pulse_us", &v.limits);
+            self.spans.opt(p, "rest_us", &v.rest);
+            self.spans.opt(p, "id", &v.id);
             self.spans.field(p, "max_speed", &v.max_speed);
             self.spans.field(p, "max_accel", &v.max_accel);
             let segment = self.segment(&v.joint, &format!("{path}.joint"))?;
@@ -999,29 +1146,23 @@ impl Builder<'_, '_> {
             let (span, [angle_min, angle_max]) =
                 self.pair(&v.angle, &v.angle_deg, &s.span(), &path, "angle")?;
             self.spans.field(p, "angle", &span);
-            let [pulse_min_us, pulse_max_us] = *v.pulse_us.get_ref();
-            let mut servo = ServoDesc {
+            let rest_angle = seg
+                .and_then(|sd| sd.dofs.as_slice().get(dof_index))
+                .map_or(0.0, |d| 0f32.clamp(d.min.min(d.max), d.max.max(d.min)));
+            let base = ServoDesc {
                 channel: *v.channel.get_ref(),
                 segment,
                 dof: u8::try_from(dof_index).unwrap_or(u8::MAX),
                 angle_min,
                 angle_max,
-                pulse_min_us,
-                pulse_max_us,
-                trim_us: v.trim_us.as_ref().map_or(0.0, |t| *t.get_ref()),
                 reversed: v.reversed.unwrap_or(false),
-                rest_us: 0.0,
                 max_speed: *v.max_speed.get_ref(),
                 max_accel: *v.max_accel.get_ref(),
+                ..ServoDesc::default()
             };
-            servo.rest_us = match &v.rest_us {
-                Some(r) => *r.get_ref(),
-                None => {
-                    let rest_angle = seg
-                        .and_then(|sd| sd.dofs.as_slice().get(dof_index))
-                        .map_or(0.0, |d| 0f32.clamp(d.min.min(d.max), d.max.max(d.min)));
-                    rest_pulse(&servo.calibration(), rest_angle)
-                }
+            let servo = match self.bus {
+                None => self.pulse_servo(s, base, rest_angle, &path)?,
+                Some(scale) => self.bus_servo(s, base, scale, rest_angle, &path)?,
             };
             if out.push(servo).is_err() {
                 return Err(self.src.err(
@@ -1032,6 +1173,103 @@ impl Builder<'_, '_> {
             }
         }
         Ok(out)
+    }
+
+    /// A key that the output kind does not use.
+    fn unused_key<T>(&self, v: &Option<S<T>>, path: &str, key: &str) -> Result<(), RigFileError> {
+        match v {
+            Some(v) => Err(self.err(
+                v,
+                &format!("{path}.{key}"),
+                if self.bus.is_some() {
+                    "not used by a serial bus output (it takes id, center, limits, rest)"
+                } else {
+                    "only for a serial bus output (dynamixel, feetech)"
+                },
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// A pulse servo (PWM, PCA9685, Maestro): `pulse_us`, `trim_us`,
+    /// `rest_us`.
+    fn pulse_servo(
+        &self,
+        s: &S<RawServo>,
+        mut servo: ServoDesc,
+        rest_angle: f32,
+        path: &str,
+    ) -> Result<ServoDesc, RigFileError> {
+        let v = s.get_ref();
+        self.unused_key(&v.id, path, "id")?;
+        self.unused_key(&v.center, path, "center")?;
+        self.unused_key(&v.limits, path, "limits")?;
+        self.unused_key(&v.rest, path, "rest")?;
+        let Some(pulse) = &v.pulse_us else {
+            return Err(self
+                .src
+                .err(&s.span(), format!("{path}.pulse_us"), "missing pulse_us"));
+        };
+        [servo.pulse_min_us, servo.pulse_max_us] = *pulse.get_ref();
+        servo.trim_us = v.trim_us.as_ref().map_or(0.0, |t| *t.get_ref());
+        servo.id = servo.channel;
+        servo.rest_us = match &v.rest_us {
+            Some(r) => *r.get_ref(),
+            None => rest_pulse(&servo.calibration(), rest_angle),
+        };
+        Ok(servo)
+    }
+
+    /// A serial bus servo: `position = center ± angle · per_rad` (− when
+    /// reversed), its angle range narrowed to where the positions stay
+    /// within `limits`.
+    fn bus_servo(
+        &self,
+        s: &S<RawServo>,
+        mut servo: ServoDesc,
+        scale: BusScale,
+        rest_angle: f32,
+        path: &str,
+    ) -> Result<ServoDesc, RigFileError> {
+        let v = s.get_ref();
+        self.unused_key(&v.pulse_us, path, "pulse_us")?;
+        self.unused_key(&v.trim_us, path, "trim_us")?;
+        self.unused_key(&v.rest_us, path, "rest_us")?;
+        let center = v.center.as_ref().map_or(scale.center, |c| *c.get_ref());
+        let [a, b] = v.limits.as_ref().map_or(scale.limits, |l| *l.get_ref());
+        let (lo, hi) = (a.min(b), a.max(b));
+        let slope = if servo.reversed {
+            -scale.per_rad
+        } else {
+            scale.per_rad
+        };
+        let position = |angle: f32| center + slope * angle;
+        let angle_at = |p: f32| (p - center) / slope;
+        let clamp = |angle: f32| angle_at(position(angle).clamp(lo, hi));
+        let (a0, a1) = (clamp(servo.angle_min), clamp(servo.angle_max));
+        if a0.partial_cmp(&a1) != Some(std::cmp::Ordering::Less) {
+            let span = v.limits.as_ref().map_or(s.span(), S::span);
+            return Err(self.src.err(
+                &span,
+                format!("{path}.limits"),
+                format!(
+                    "the angle range maps to positions {:.0} ..= {:.0}, outside the limits {lo} ..= {hi}",
+                    position(servo.angle_min),
+                    position(servo.angle_max)
+                ),
+            ));
+        }
+        servo.angle_min = a0;
+        servo.angle_max = a1;
+        servo.pulse_min_us = position(a0);
+        servo.pulse_max_us = position(a1);
+        servo.reversed = false;
+        servo.id = v.id.as_ref().map_or(servo.channel, |i| *i.get_ref());
+        servo.rest_us = match &v.rest {
+            Some(r) => *r.get_ref(),
+            None => position(rest_angle.clamp(a0, a1)),
+        };
+        Ok(servo)
     }
 
     fn params(&mut self, raw: &[S<RawParam>]) -> Result<List<ParamMap, MAX_PARAMS>, RigFileError> {

@@ -409,7 +409,7 @@ fn flash_dry_run_prints_the_plan_or_refuses() {
     std::fs::write(&junk, b"not a table").unwrap();
     let err = fails(&["flash", "--tables", s(&junk), "--dry-run"]);
     assert!(
-        err.contains("not valid") && err.contains("--no-check"),
+        err.contains("would not arm") && err.contains("NoRig") && err.contains("--no-check"),
         "{err}"
     );
     let plan = ok(&["flash", "--tables", s(&junk), "--dry-run", "--no-check"]);
@@ -431,4 +431,42 @@ fn flash_dry_run_prints_the_plan_or_refuses() {
         "NOPE",
     ]);
     assert!(err.contains("NOPE"), "{err}");
+}
+
+#[test]
+fn flash_dry_run_makes_the_region_and_reads_it_back_as_the_board() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../rigs/humanoid16.toml");
+    let rig = marionette_host::rigfile::load(&rig_path).unwrap();
+    let table = marionette_host::perform::rest_grid(&rig, &[("x", 0.0, 0.5, 3)]).unwrap();
+    let table_path = dir.path().join("table.bin");
+    std::fs::write(&table_path, &table).unwrap();
+    // A bare table blob is refused, naming the fix.
+    let err = fails(&["flash", "--tables", s(&table_path), "--dry-run"]);
+    assert!(
+        err.contains("bare table blob") && err.contains("--rig"),
+        "{err}"
+    );
+    // With the rig: a region, checked before and read back after.
+    let out = ok(&[
+        "flash",
+        "--rig",
+        s(&rig_path),
+        "--tables",
+        s(&table_path),
+        "--dry-run",
+    ]);
+    assert!(out.contains("table region (rig + tables)"), "{out}");
+    assert!(
+        out.contains("board view: region v1 (2 entries): rig `humanoid16`"),
+        "{out}"
+    );
+    assert!(
+        out.contains("read back (staged bytes over erased flash): region v1")
+            && out.contains("the board arms"),
+        "{out}"
+    );
+    // The rig alone: no table, the board's reason.
+    let err = fails(&["flash", "--rig", s(&rig_path), "--dry-run"]);
+    assert!(err.contains("NoTable"), "{err}");
 }

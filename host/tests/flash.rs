@@ -7,10 +7,12 @@
 
 use glam::{Quat, Vec3};
 use marionette_core::table::{Interp, Kind, Wrap};
+use marionette_core::wire::StatusReason;
 use marionette_host::blob::{self, AxisSpec, TableSpec};
 use marionette_host::flash::{
     self, BLACKPILL, Chunk, Content, DEFAULT_CHIP, FlashError, Options, Plan, Region,
 };
+use marionette_host::{icount, perform, rigfile};
 use probe_rs::Permissions;
 use probe_rs::probe::fake_probe::FakeProbe;
 
@@ -130,7 +132,19 @@ fn elf32(sections: &[Sec]) -> Vec<u8> {
     out
 }
 
-/// A small valid table blob (one axis, one segment).
+/// A region the Black Pill arms with: `humanoid16` (a Maestro at 115 200
+/// baud) and a 5×5×5 rest-pose grid built for it.
+fn arming_region() -> Vec<u8> {
+    icount::bench_region().expect("the bench region builds")
+}
+
+/// The humanoid16 rig blob.
+fn humanoid16_blob() -> Vec<u8> {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../rigs/humanoid16.toml");
+    rigfile::to_blob(&rigfile::load(std::path::Path::new(path)).unwrap()).unwrap()
+}
+
+/// A small valid table blob (one axis, one segment), built for no rig.
 fn tiny_blob() -> Vec<u8> {
     blob::write(&TableSpec {
         rig_hash: 0x1234,
@@ -246,19 +260,68 @@ fn blob_filling_the_region_exactly_is_planned_at_its_start() {
     assert!(!plan.has_firmware());
 }
 
+/// The board's reason for a region, through the plan's check.
+fn refused(region: &[u8]) -> (StatusReason, String) {
+    match flash::plan(&BLACKPILL, None, Some(region), true) {
+        Err(FlashError::WouldNotArm { reason, why }) => (reason, why),
+        other => panic!("not refused as the board would: {other:?}"),
+    }
+}
+
 #[test]
-fn blob_that_is_not_a_table_is_refused_unless_unchecked() {
-    let junk = b"definitely not a table blob".to_vec();
-    let err = flash::plan(&BLACKPILL, None, Some(&junk), true).unwrap_err();
-    assert!(matches!(err, FlashError::BadTables(_)), "{err:?}");
-    assert!(err.to_string().contains("bad magic"), "{err}");
+fn regions_the_board_would_not_arm_with_are_refused_with_its_reason() {
+    let region = arming_region();
+    let armed = flash::check_region(&BLACKPILL, &region).unwrap();
+    assert_eq!(armed.rig, "humanoid16");
+    assert_eq!((armed.segments, armed.servos), (13, 16));
+    assert_eq!(
+        (armed.output, armed.grid.clone()),
+        ("maestro", vec![5, 5, 5])
+    );
+    assert!(armed.to_string().contains("the board arms"), "{armed}");
+    assert!(flash::plan(&BLACKPILL, None, Some(&region), true).is_ok());
+
+    // Junk: no rig. Flashed anyway with the check off.
+    let junk = b"definitely not a region".to_vec();
+    assert_eq!(refused(&junk).0, StatusReason::NoRig);
     assert!(flash::plan(&BLACKPILL, None, Some(&junk), false).is_ok());
-    // A real blob with one flipped byte fails its CRC.
-    let mut blob = tiny_blob();
-    let last = blob.len() - 1;
-    blob[last] ^= 1;
-    let err = flash::plan(&BLACKPILL, None, Some(&blob), true).unwrap_err();
-    assert!(err.to_string().contains("CRC"), "{err}");
+    // A bare table blob: the old mistake, named.
+    let err = flash::plan(&BLACKPILL, None, Some(&tiny_blob()), true).unwrap_err();
+    assert!(matches!(err, FlashError::BareTable), "{err:?}");
+    assert!(err.to_string().contains("--rig"), "{err}");
+    // A flipped bit in the table blob: its CRC, with the table's words.
+    let mut bad = region.clone();
+    let last = bad.len() - 1;
+    bad[last] ^= 1;
+    let (reason, why) = refused(&bad);
+    assert_eq!(reason, StatusReason::BadCrc);
+    assert!(why.contains("table 0") && why.contains("CRC"), "{why}");
+    // The directory's own CRC.
+    let mut bad = region.clone();
+    bad[9] ^= 1;
+    let (reason, why) = refused(&bad);
+    assert_eq!(reason, StatusReason::BadCrc);
+    assert!(why.contains("directory"), "{why}");
+    // A rig and no table.
+    let rig_only = perform::region(&humanoid16_blob(), None);
+    assert_eq!(refused(&rig_only).0, StatusReason::NoTable);
+    // A table built for another rig.
+    let other = perform::region(&humanoid16_blob(), Some(&tiny_blob()));
+    assert_eq!(refused(&other).0, StatusReason::RigMismatch);
+    // A rate the Black Pill's servo UART cannot make.
+    let rig = rigfile::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../rigs/humanoid16.toml"
+    )))
+    .unwrap();
+    let mut desc = rig.desc();
+    desc.output = marionette_core::rig::Output::Dynamixel { baud: 3_000_000 };
+    let mut buf = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
+    let n = desc.to_blob(&mut buf).unwrap();
+    let table = perform::rest_grid(&rig, &[("x", 0.0, 1.0, 2)]).unwrap();
+    let (reason, why) = refused(&perform::region(&buf[..n], Some(&table)));
+    assert_eq!(reason, StatusReason::Unsupported);
+    assert!(why.contains("3000000 baud"), "{why}");
 }
 
 #[test]
@@ -306,7 +369,7 @@ fn elf_segments_are_planned_at_their_load_addresses() {
     // The bytes written: i mod 251.
     assert_eq!(segs[1].data[249..253], [249, 250, 0, 1]);
 
-    let blob = tiny_blob();
+    let blob = arming_region();
     let plan = flash::plan(&BLACKPILL, Some(&elf), Some(&blob), true).unwrap();
     assert_eq!(plan.chunks.len(), 4);
     assert!(plan.has_firmware());
@@ -383,7 +446,7 @@ fn elf_for_another_memory_map_is_refused() {
 
 #[test]
 fn plan_is_checked_against_the_chips_memory_map() {
-    let blob = tiny_blob();
+    let blob = arming_region();
     let plan = flash::plan(&BLACKPILL, None, Some(&blob), true).unwrap();
     flash::check_chip(&plan, DEFAULT_CHIP).unwrap();
     let err = flash::check_chip(&plan, "NOT_A_CHIP").unwrap_err();
@@ -414,8 +477,8 @@ fn fitting_plan_commits_as_a_dry_run_on_a_fake_probe() {
         progbits(".vector_table", 0x0800_0000, 0x198),
         progbits(".text", 0x0800_0198, 4000),
     ]);
-    let blob = tiny_blob();
-    let plan = flash::plan(&BLACKPILL, Some(&elf), Some(&blob), true).unwrap();
+    let region = arming_region();
+    let plan = flash::plan(&BLACKPILL, Some(&elf), Some(&region), true).unwrap();
     for chip in ["STM32F411RETx", DEFAULT_CHIP] {
         let mut session = fake_session(chip);
         let mut events = 0;
@@ -423,11 +486,40 @@ fn fitting_plan_commits_as_a_dry_run_on_a_fake_probe() {
             verify: false,
             dry_run: true,
         };
-        flash::program(&mut session, &plan, options, |_| events += 1)
-            .unwrap_or_else(|e| panic!("{chip}: {e}"));
+        let read_back = flash::program(&mut session, &plan, options, |_| events += 1)
+            .unwrap_or_else(|e| panic!("{chip}: {e}"))
+            .expect("the plan writes the table region");
         // A dry run reports its skipped steps and nothing else.
         assert!(events > 0, "{chip}: no progress event");
+        // What the board will read: the region probe-rs staged, then erased
+        // flash to the end of the 256 KiB table region; it parses as a
+        // region the board arms with.
+        assert!(read_back.staged);
+        assert_eq!(read_back.image.len(), 256 * 1024);
+        assert_eq!(&read_back.image[..region.len()], &region[..]);
+        assert!(read_back.image[region.len()..].iter().all(|&b| b == 0xFF));
+        let armed = read_back.verdict.as_ref().expect("the board arms");
+        assert_eq!((armed.rig.as_str(), armed.servos), ("humanoid16", 16));
+        let board = marionette_core::region::Region::<
+            { marionette_core::region::FIRMWARE_SEGMENTS },
+        >::parse_sized(&read_back.image);
+        assert_eq!(board.reason, StatusReason::Ok);
+        // Without a probe, the same staged bytes.
+        let dry = flash::dry_read_back(&plan, chip).unwrap().unwrap();
+        assert_eq!(dry.image, read_back.image);
     }
+    // A plan without the table region reads nothing back.
+    let firmware_only = flash::plan(&BLACKPILL, Some(&elf), None, true).unwrap();
+    let mut session = fake_session(DEFAULT_CHIP);
+    let options = Options {
+        verify: false,
+        dry_run: true,
+    };
+    assert!(
+        flash::program(&mut session, &firmware_only, options, |_| {})
+            .unwrap()
+            .is_none()
+    );
 }
 
 #[test]

@@ -1,17 +1,19 @@
-//! The live loop: bytes from the tracker link in, servo targets out.
+//! One step of the live loop: a validated tracker frame in, servo targets out.
 //!
-//! [`Performer`] is the whole per-frame pipeline of a puppet, shared by the
-//! firmware (which only moves bytes between it and the peripherals) and the
-//! host's `marionette sim` (which feeds it a recording). Given the same bytes
-//! and the same clock readings, both produce bit-identical servo targets.
+//! [`Pipeline`] is the per-frame work of a puppet (map, synthesize, solve,
+//! servo), shared by the firmware and the host's `marionette sim` through
+//! [`Performer`], which owns the protocol (hello,
+//! arm, disarm, status, fail-safe) and calls the pipeline once per accepted
+//! frame. Given the same frames and the same clock readings, host and board
+//! produce bit-identical servo targets.
 //!
 //! ## One tracker frame
 //!
 //! ```text
-//! wire::Receiver ─ ValidTrackerFrame ─▶ map   rig sensor map → parameters + weighted goals
-//!                                      ▶ synth grid query on the table blob, read in place
-//!                                      ▶ solve synthesized pose + last frame's correction
-//!                                      ▶ servo joint angle → calibrated pulse → slew limit
+//! ValidTrackerFrame ─▶ map   rig sensor map → parameters + weighted goals
+//!                    ▶ synth grid query on the table blob, read in place
+//!                    ▶ solve synthesized pose + last frame's correction
+//!                    ▶ servo joint angle → calibrated pulse → slew limit
 //! ```
 //!
 //! - **map**: [`Rig::map_sensors`] after boresight correction; `Params`
@@ -34,25 +36,28 @@
 //!
 //! ## Time
 //!
-//! One output step is made per accepted tracker frame. The slew limits of a
+//! One output step is made per performed tracker frame. The slew limits of a
 //! step are those of `dt = min(Δt_tracker, frame period)`, where `Δt_tracker`
 //! is the difference of the frames' own timestamps: a tracker faster than the
 //! rig's frame rate cannot make a servo faster than its limit, and a slow one
 //! only makes it slower. Wrapping timestamps are handled; a timestamp that
 //! goes backwards counts as `dt = 0` (the smallest step the limiter allows).
+//! [`Pipeline::ease_to_rest`] makes one step towards every servo's rest
+//! pulse at the frame period, within the same limits.
 //!
-//! ## Fail-safe
+//! ## Idle
 //!
-//! [`Performer::tick`] is called by the board every frame period with its own
-//! clock. When armed and no valid tracker frame has arrived for the rig's
-//! fail-safe timeout, every servo eases to its rest pulse within its slew
-//! limits. The same happens after `Disarm`. A board without a valid rig and
-//! table refuses to arm and reports why in its [`Status`].
+//! Once every servo is at rest after a disarm or a fail-safe trip, a rig
+//! whose idle policy is `Off` ([`crate::rig::Idle`]) releases the outputs
+//! with one more update whose targets are all 0 ("no pulse"; a bus servo's
+//! torque off); `Hold` keeps the rest targets. Outputs are never released
+//! before the first armed frame, and the next armed frame drives them again
+//! from rest ([`Pipeline::rest_step`]).
 //!
 //! ## Capacity
 //!
-//! [`Region`], [`Performer`] and the [`SolverState`] the caller lends the
-//! performer hold the rig, poses, joint angles and the solver's working
+//! [`Region`], [`Pipeline`] and the [`SolverState`] the caller lends the
+//! pipeline hold the rig, poses, joint angles and the solver's working
 //! state for at most `N` segments, a const parameter (default
 //! [`MAX_SEGMENTS`], the rig format's limit). A firmware picks the smallest
 //! that fits its rigs (the firmware's 24 holds the shipped puppet
@@ -64,25 +69,23 @@
 //! let mut region = Region::<24>::EMPTY;
 //! region.parse_into(flash_bytes);
 //! let mut solver = SolverState::<24>::new(); // most of the loop's memory
-//! let mut performer = Performer::new(&region, &mut solver); // Option<Performer<'_, '_, 24>>
+//! let mut performer = Performer::new(&region, &mut solver); // Performer<'_, '_, 24>
 //! ```
 //!
 //! A rig with more segments than `N` is refused as
-//! [`StatusReason::RigTooLarge`], like a missing rig: nothing is driven.
+//! [`RigTooLarge`](crate::wire::StatusReason::RigTooLarge), like a missing rig: nothing is driven.
 
 use crate::body::{Angles, Body};
 use crate::goal::GoalSet;
 use crate::grid::{Adjust, Grid, Query};
+pub use crate::perform::{Cause, Performer, Update};
 use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
-use crate::rig::{MAX_PARAMS, Rig, RigError};
+pub use crate::region::Region;
+use crate::rig::{Idle, MAX_PARAMS, Rig};
 use crate::servo::{Slew, quarter_us};
 use crate::solve::{self, Solver, SolverState};
-use crate::table::{Kind, Table, TableError};
-use crate::wire::{
-    Ack, CommandKind, ErrorCounters, Incoming, List, MAX_GOALS, MAX_SENSORS, MAX_SERVOS, Message,
-    PROTOCOL_VERSION, Receiver, STAGES, Sensor, Status, StatusReason, Telemetry, ValidCommand,
-    ValidTrackerFrame,
-};
+use crate::table::Table;
+use crate::wire::{List, MAX_GOALS, MAX_SENSORS, MAX_SERVOS, STAGES, Sensor, ValidTrackerFrame};
 use glam::Quat;
 
 /// The live loop's solver. A constant, so that a firmware links only the
@@ -90,10 +93,7 @@ use glam::Quat;
 /// solvers the host compares it with.
 const SOLVER: Solver = Solver::DEFAULT;
 
-/// A telemetry message goes out after every this many output frames.
-pub const TELEMETRY_EVERY: u32 = 10;
-
-/// Stage indices in [`Telemetry::stage_counts`].
+/// Stage indices in [`Telemetry::stage_counts`](crate::wire::Telemetry::stage_counts).
 pub mod stage {
     /// Receiving and decoding the frame.
     pub const DECODE: usize = 0;
@@ -109,29 +109,17 @@ pub mod stage {
     pub const TOTAL: usize = 5;
 }
 
-/// Why servo targets changed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Cause {
-    /// An accepted tracker frame (its sequence number).
-    Frame(u32),
-    /// Easing to rest: fail-safe time-out or disarmed.
-    Rest,
-}
-
-/// What one call of [`Performer::receive`] or [`Performer::tick`] produced.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Update {
-    /// New servo targets are ready in [`Performer::targets`].
-    pub outputs: Option<Cause>,
-    /// A message to send back to the host.
-    pub reply: Option<Message>,
-}
-
 /// Reads a free-running cycle (or instruction) counter for the stage
-/// counts; the host passes one that reads zero.
+/// counts and frame timing; the host passes one that reads zero.
 pub trait Cycles {
     /// The counter now; differences are taken with wrapping arithmetic.
     fn now(&mut self) -> u32;
+
+    /// Counts per second (0: no counter, [`NoCycles`]). The frame period
+    /// in counts is the budget a frame overruns.
+    fn hz(&self) -> u32 {
+        0
+    }
 }
 
 /// A [`Cycles`] that always reads zero.
@@ -142,112 +130,6 @@ impl Cycles for NoCycles {
     #[inline]
     fn now(&mut self) -> u32 {
         0
-    }
-}
-
-/// The validated contents of the table region: the rig blob, then the table
-/// blob at the next 4-byte boundary. The rig has capacity `N` (see
-/// [Capacity](self#capacity)).
-#[derive(Clone, Debug)]
-pub struct Region<'a, const N: usize = MAX_SEGMENTS> {
-    /// The rig, if its blob is valid (and fits the capacity).
-    pub rig: Option<Rig<'a, N>>,
-    /// The table, if its blob is valid and matches the rig.
-    pub table: Option<Table<'a>>,
-    /// Why the board cannot arm ([`StatusReason::Ok`] if it can).
-    pub reason: StatusReason,
-}
-
-impl<'a> Region<'a> {
-    /// Validates a table region (magic, version, CRC and bounds of both
-    /// blobs, and that the table was built for this rig), at the rig
-    /// format's capacity; [`Region::parse_sized`] reads it into a smaller
-    /// rig.
-    #[must_use]
-    pub fn parse(bytes: &'a [u8]) -> Self {
-        Self::parse_sized(bytes)
-    }
-}
-
-impl<'a, const N: usize> Region<'a, N> {
-    /// [`Region::parse`] with a rig of capacity `N`: a valid rig with more
-    /// segments is refused with [`StatusReason::RigTooLarge`].
-    #[must_use]
-    pub fn parse_sized(bytes: &'a [u8]) -> Self {
-        let mut region = Self::EMPTY;
-        region.parse_into(bytes);
-        region
-    }
-
-    /// No rig and no table ([`StatusReason::NoRig`]): where
-    /// [`Region::parse_into`] starts.
-    pub const EMPTY: Self = Self {
-        rig: None,
-        table: None,
-        reason: StatusReason::NoRig,
-    };
-
-    /// [`Region::parse_sized`] in place, for a caller that keeps the region
-    /// where it is: the rig is kilobytes, and every move is a copy on the
-    /// stack. Never inlined: the decoding's temporaries stay in this call's
-    /// stack frame.
-    #[inline(never)]
-    pub fn parse_into(&mut self, bytes: &'a [u8]) {
-        self.table = None;
-        self.reason = StatusReason::NoRig;
-        let rest = match Rig::parse_into(bytes, &mut self.rig) {
-            Ok(rest) => rest,
-            Err(RigError::Capacity { .. }) => {
-                self.reason = StatusReason::RigTooLarge;
-                return;
-            }
-            Err(_) => return,
-        };
-        let Some(rig) = &self.rig else {
-            return;
-        };
-        let pad = (4 - (bytes.len() - rest.len()) % 4) % 4;
-        let table_bytes = rest.get(pad..).unwrap_or(&[]);
-        (self.table, self.reason) = if table_bytes.len() < 4 {
-            (None, StatusReason::NoTable)
-        } else {
-            match Table::parse(table_bytes) {
-                Ok(t) => match check_table(rig, &t) {
-                    StatusReason::Ok => (Some(t), StatusReason::Ok),
-                    why => (None, why),
-                },
-                Err(TableError::BadMagic) if erased(table_bytes) => (None, StatusReason::NoTable),
-                Err(e) => (None, table_reason(e)),
-            }
-        };
-    }
-}
-
-/// Whether a valid table can drive this rig.
-fn check_table<const N: usize>(rig: &Rig<'_, N>, table: &Table<'_>) -> StatusReason {
-    if table.rig_hash() != rig.rig_hash() || table.segment_count() != rig.body().len() {
-        StatusReason::RigMismatch
-    } else if table.kind() != Kind::Grid || table.axes().len() > MAX_PARAMS {
-        StatusReason::Unsupported
-    } else {
-        StatusReason::Ok
-    }
-}
-
-/// Whether the table slot starts like erased flash (`FF`) or an empty
-/// emulator region (`00`): no table was written, as opposed to a damaged one.
-fn erased(bytes: &[u8]) -> bool {
-    let head = bytes.get(..4).unwrap_or(&[]);
-    head.iter().all(|&b| b == 0x00) || head.iter().all(|&b| b == 0xFF)
-}
-
-/// The status reason for a table that failed to parse.
-fn table_reason(e: TableError) -> StatusReason {
-    match e {
-        TableError::BadMagic => StatusReason::BadMagic,
-        TableError::BadVersion { .. } => StatusReason::BadVersion,
-        TableError::BadCrc => StatusReason::BadCrc,
-        _ => StatusReason::BadBounds,
     }
 }
 
@@ -360,16 +242,17 @@ impl<const N: usize> Correction<N> {
     }
 }
 
-/// The live loop of one rig, for at most `N` segments (see the module doc).
-pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
+/// The per-frame pipeline of one rig, for at most `N` segments (see the
+/// module doc): map, synthesize, solve, servo.
+pub struct Pipeline<'r, 'a, const N: usize = MAX_SEGMENTS> {
     rig: &'r Rig<'a, N>,
     table: Option<&'r Table<'a>>,
     grid: Option<Grid<'a>>,
-    reason: StatusReason,
-    receiver: Receiver,
-    armed: bool,
     resting: bool,
-    last_frame_us: u32,
+    /// Whether an armed frame has driven the outputs since boot.
+    driven: bool,
+    /// Whether the outputs were released at rest (the rig's `Idle::Off`).
+    released: bool,
     last_tracker_us: Option<u32>,
     params: [f32; MAX_PARAMS],
     dials: List<f32, MAX_PARAMS>,
@@ -391,33 +274,24 @@ pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
     targets: [u16; MAX_SERVOS],
     channels: usize,
     residuals: [f32; MAX_GOALS],
-    stages: [u32; STAGES],
-    frames_out: u32,
     adjusted: u32,
     failed_frames: u32,
-    disarms: u32,
 }
 
-impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
-    /// A loop for `region`'s rig (disarmed; servos assumed at rest), solving
-    /// with `solver`'s storage. Returns `None` when the region holds no valid
-    /// rig: there is nothing to drive.
+impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
+    /// The pipeline of `region`'s rig (servos assumed at rest), solving with
+    /// `solver`'s storage; `None` when the region holds no valid rig.
     ///
-    /// The solver's state is most of a performer's memory (about 12 kB at
-    /// 24 segments), so the caller provides it, like a socket buffer in
-    /// smoltcp: where it lives is the caller's choice, and the performer,
-    /// returned by value, stays small enough to move. Never inlined, like
+    /// The solver's state is most of a pipeline's memory (about 12 kB at 24
+    /// segments), so the caller provides it, like a socket buffer in smoltcp:
+    /// where it lives is the caller's choice, and the pipeline, returned by
+    /// value, stays small enough to move. Never inlined, like
     /// [`Region::parse_into`].
     #[must_use]
     #[inline(never)]
     pub fn new(region: &'r Region<'a, N>, solver: &'r mut SolverState<N>) -> Option<Self> {
         let rig = region.rig.as_ref()?;
         solver.reset();
-        let grid = region.table.as_ref().and_then(|t| t.grid().ok());
-        let reason = match (region.reason, &grid) {
-            (StatusReason::Ok, None) => StatusReason::Unsupported,
-            (r, _) => r,
-        };
         let period = rig.frame_period_s();
         let mut slews = [None; MAX_SERVOS];
         let mut targets = [0u16; MAX_SERVOS];
@@ -439,12 +313,10 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         Some(Self {
             rig,
             table: region.table.as_ref(),
-            grid,
-            reason,
-            receiver: Receiver::new(),
-            armed: false,
+            grid: region.table.as_ref().and_then(|t| t.grid().ok()),
             resting: true,
-            last_frame_us: 0,
+            driven: false,
+            released: false,
             last_tracker_us: None,
             params: [0.0; MAX_PARAMS],
             dials: List::new(),
@@ -463,29 +335,21 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             targets,
             channels,
             residuals: [0.0; MAX_GOALS],
-            stages: [0; STAGES],
-            frames_out: 0,
             adjusted: 0,
             failed_frames: 0,
-            disarms: 0,
         })
     }
 
-    /// Marks the loop as unable to drive this rig on this board (for
-    /// example a servo back-end the board lacks): it disarms, refuses every
-    /// `Arm`, and reports `reason` in its [`Status`] (unless the tables
-    /// already gave a reason, which is reported first).
-    pub fn refuse(&mut self, reason: StatusReason) {
-        if self.reason == StatusReason::Ok {
-            self.reason = reason;
-        }
-        self.armed = false;
+    /// The rig it drives.
+    #[must_use]
+    pub fn rig(&self) -> &'r Rig<'a, N> {
+        self.rig
     }
 
-    /// The rig's frame period, µs: call [`Performer::tick`] this often.
+    /// Whether the table is a grid this pipeline can synthesize from.
     #[must_use]
-    pub fn frame_period_us(&self) -> u32 {
-        self.rig.frame_period_us()
+    pub fn has_grid(&self) -> bool {
+        self.grid.is_some()
     }
 
     /// The servo targets by channel, quarter-µs (0: channel unused).
@@ -494,22 +358,18 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         self.targets.get(..self.channels).unwrap_or(&[])
     }
 
-    /// Whether the servo outputs are enabled.
+    /// The current world pose of the figure (solved, or rest).
     #[must_use]
-    pub fn armed(&self) -> bool {
-        self.armed
+    pub fn pose(&self) -> &Pose<N> {
+        &self.pose
     }
 
-    /// Why the board cannot arm ([`StatusReason::Ok`] if it can).
+    /// The remaining distance to each active goal after the last solve, m.
     #[must_use]
-    pub fn reason(&self) -> StatusReason {
-        self.reason
-    }
-
-    /// The receive path's error counters.
-    #[must_use]
-    pub fn errors(&self) -> &ErrorCounters {
-        self.receiver.errors()
+    pub fn residuals(&self) -> &[f32] {
+        self.residuals
+            .get(..self.goals.as_slice().len())
+            .unwrap_or(&[])
     }
 
     /// Frames whose parameters had to be clamped or projected into the table.
@@ -524,140 +384,60 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         self.failed_frames
     }
 
-    /// The current world pose of the figure (solved, or rest).
-    #[must_use]
-    pub fn pose(&self) -> &Pose<N> {
-        &self.pose
-    }
-
-    /// The per-stage counts of the last tracker frame (see [`stage`]), in the
-    /// units of the [`Cycles`] passed to [`Performer::receive`].
-    #[must_use]
-    pub fn stages(&self) -> [u32; STAGES] {
-        self.stages
-    }
-
-    /// The board's status message.
-    #[must_use]
-    pub fn status(&self) -> Status {
-        Status {
-            protocol_version: PROTOCOL_VERSION,
-            armed: self.armed,
-            table_ok: self.reason == StatusReason::Ok,
-            reason: self.reason,
-            errors: *self.receiver.errors(),
-            frames_ok: self.receiver.frames_ok(),
-        }
-    }
-
-    /// Feeds received bytes, advancing `input` past what was consumed, until
-    /// one message has been handled; call again while `input` is not empty.
-    /// `now_us` is the board clock.
-    pub fn receive(&mut self, input: &mut &[u8], now_us: u32, cycles: &mut dyn Cycles) -> Update {
-        let start = cycles.now();
-        let none = Update {
-            outputs: None,
-            reply: None,
-        };
-        let Some(incoming) = self.receiver.push_slice(input) else {
-            return none;
-        };
-        let decoded = cycles.now();
-        match incoming {
-            Incoming::Hello { accepted, .. } => {
-                if !accepted {
-                    self.reason = StatusReason::ProtocolMismatch;
-                    self.armed = false;
-                }
-                Update {
-                    outputs: None,
-                    reply: Some(Message::Status(self.status())),
-                }
-            }
-            Incoming::Params(p) => {
-                self.dials = List::from_slice(p.values()).unwrap_or_default();
-                none
-            }
-            Incoming::Command(c) => Update {
-                outputs: None,
-                reply: Some(self.command(c)),
-            },
-            Incoming::Tracker(frame) => {
-                self.stages[stage::DECODE] = decoded.wrapping_sub(start);
-                self.last_frame_us = now_us;
-                self.frame(&frame, cycles, start)
-            }
-        }
-    }
-
-    /// Called by the board every frame period: eases to rest after the
-    /// fail-safe time-out or a disarm. Returns outputs only when they moved.
-    pub fn tick(&mut self, now_us: u32) -> Update {
-        let timeout_us = self.rig.failsafe_timeout_ms().saturating_mul(1000);
-        let lost = self.armed && now_us.wrapping_sub(self.last_frame_us) >= timeout_us;
-        if lost || !self.armed {
-            self.warm.clear();
-        }
-        if (lost || !self.armed) && !self.resting {
-            let moved = self.ease_to_rest();
-            return Update {
-                outputs: moved.then_some(Cause::Rest),
-                reply: None,
-            };
-        }
-        Update {
-            outputs: None,
-            reply: None,
-        }
-    }
-
-    fn disarm(&mut self) {
-        self.armed = false;
-        self.warm.clear();
-        self.disarms = self.disarms.wrapping_add(1);
-    }
-
-    /// How many `Disarm` commands the loop has obeyed.
-    #[must_use]
-    pub fn disarms(&self) -> u32 {
-        self.disarms
-    }
-
     /// Whether every servo is at its rest pulse and still.
     #[must_use]
     pub fn resting(&self) -> bool {
         self.resting
     }
 
-    fn command(&mut self, c: ValidCommand) -> Message {
-        let ok = match c.kind() {
-            CommandKind::Arm => {
-                self.armed = self.reason == StatusReason::Ok;
-                self.armed
-            }
-            CommandKind::Disarm => {
-                self.disarm();
-                true
-            }
-            CommandKind::SelectTable(n) => n == 0 && self.reason == StatusReason::Ok,
-            CommandKind::SelectClip(_) => false,
-            CommandKind::SetGoalWeight { goal, weight } => {
-                match self.weights.get_mut(usize::from(goal)) {
-                    Some(w) => {
-                        *w = Some(weight);
-                        true
-                    }
-                    None => false,
-                }
-            }
-            CommandKind::Boresight { sensor } => self.boresight(sensor),
-            CommandKind::RequestStatus => return Message::Status(self.status()),
-        };
-        Message::Ack(Ack { seq: c.seq(), ok })
+    /// Whether the outputs have nothing left to do until the next armed
+    /// frame: at rest, and released if the rig's idle policy is `Off` (and
+    /// they were ever driven).
+    #[must_use]
+    pub fn settled(&self) -> bool {
+        self.resting && !self.release_due()
     }
 
-    /// Takes sensor `id`'s last orientation as its zero.
-    fn boresight(&mut self, id: u8) -> bool {
+    /// Whether the outputs are at rest but still to be released.
+    fn release_due(&self) -> bool {
+        self.rig.idle() == Idle::Off && self.driven && !self.released
+    }
+
+    /// One step towards rest, disarmed or timed out: ease to rest, then
+    /// (idle policy `Off`) release every output once (see
+    /// [Idle](self#idle)). True if the targets changed.
+    pub fn rest_step(&mut self) -> bool {
+        if !self.resting {
+            self.ease_to_rest()
+        } else if self.release_due() {
+            self.released = true;
+            self.targets.fill(0);
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Sets the dials (a `Params` message): they override parameters
+    /// `0..values.len()` from the next frame on.
+    pub fn set_dials(&mut self, values: &[f32]) {
+        self.dials = List::from_slice(values).unwrap_or_default();
+    }
+
+    /// Overrides goal `goal`'s weight; false if there is no such goal slot.
+    pub fn set_goal_weight(&mut self, goal: u8, weight: f32) -> bool {
+        match self.weights.get_mut(usize::from(goal)) {
+            Some(w) => {
+                *w = Some(weight);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Takes sensor `id`'s last orientation as its zero; false if the last
+    /// frame had no such sensor.
+    pub fn boresight(&mut self, id: u8) -> bool {
         let Some(s) = self.last_sensors.iter().find(|s| s.id == id) else {
             return false;
         };
@@ -671,18 +451,30 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         }
     }
 
-    /// One accepted tracker frame.
-    fn frame(&mut self, frame: &ValidTrackerFrame, cycles: &mut dyn Cycles, start: u32) -> Update {
+    /// Takes a frame's sensors (boresight-corrected) and time; returns the
+    /// step length `dt` for it, seconds (see [Time](self#time)).
+    pub fn take(&mut self, frame: &ValidTrackerFrame) -> f32 {
         let dt = self.frame_dt(frame.time_us());
         self.remember(frame);
-        if !self.armed {
-            let moved = !self.resting && self.ease_to_rest();
-            return Update {
-                outputs: moved.then_some(Cause::Rest),
-                reply: None,
-            };
-        }
+        dt
+    }
+
+    /// Drops the solver's correction (the warm start): the fail-safe
+    /// tripped or the loop disarmed, so the next solve starts from the
+    /// synthesized pose.
+    pub fn drop_correction(&mut self) {
+        self.warm.clear();
+    }
+
+    /// Map, synthesize, solve and drive the servos for the frame last
+    /// [`Pipeline::take`]n, with steps of `dt` seconds. Writes the stage
+    /// counts `MAP..=SERVO` into `stages` and returns the counter at the end.
+    /// If synthesis or solving fails the targets are held and the frame is
+    /// counted in [`Pipeline::failed_frames`].
+    pub fn perform(&mut self, dt: f32, cycles: &mut dyn Cycles, stages: &mut [u32; STAGES]) -> u32 {
         self.resting = false;
+        self.released = false;
+        self.driven = true;
         let t0 = cycles.now();
         self.map();
         let t1 = cycles.now();
@@ -696,21 +488,11 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             self.failed_frames = self.failed_frames.saturating_add(1);
         }
         let t4 = cycles.now();
-        self.stages[stage::MAP] = t1.wrapping_sub(t0);
-        self.stages[stage::SYNTH] = t2.wrapping_sub(t1);
-        self.stages[stage::SOLVE] = t3.wrapping_sub(t2);
-        self.stages[stage::SERVO] = t4.wrapping_sub(t3);
-        self.stages[stage::TOTAL] = t4.wrapping_sub(start);
-        self.frames_out = self.frames_out.wrapping_add(1);
-        // The reply set in place: an update is hundreds of bytes.
-        let mut update = Update {
-            outputs: Some(Cause::Frame(frame.seq())),
-            reply: None,
-        };
-        if self.frames_out.is_multiple_of(TELEMETRY_EVERY) {
-            update.reply = Some(self.telemetry(frame.seq()));
-        }
-        update
+        stages[stage::MAP] = t1.wrapping_sub(t0);
+        stages[stage::SYNTH] = t2.wrapping_sub(t1);
+        stages[stage::SOLVE] = t3.wrapping_sub(t2);
+        stages[stage::SERVO] = t4.wrapping_sub(t3);
+        t4
     }
 
     /// The step length for a frame at tracker time `time_us`, seconds.
@@ -852,8 +634,9 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     }
 
     /// One rest-ward step of every servo at the frame period. True if any
-    /// target moved.
-    fn ease_to_rest(&mut self) -> bool {
+    /// target moved; once every servo is at rest and still,
+    /// [`Pipeline::resting`] is true.
+    pub fn ease_to_rest(&mut self) -> bool {
         let period = self.rig.frame_period_s();
         self.set_step(period);
         let mut moved = false;
@@ -872,20 +655,5 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         }
         self.resting = all_rest;
         moved
-    }
-
-    fn telemetry(&self, seq: u32) -> Message {
-        Message::Telemetry(Telemetry {
-            seq,
-            servo_targets: List::from_slice(self.targets()).unwrap_or_default(),
-            goal_residuals: List::from_slice(
-                self.residuals
-                    .get(..self.goals.as_slice().len())
-                    .unwrap_or(&[]),
-            )
-            .unwrap_or_default(),
-            stage_counts: self.stages,
-            errors: *self.receiver.errors(),
-        })
     }
 }

@@ -9,9 +9,13 @@
 //! | [`Pwm`] | on-chip timer channels ([`embedded_hal::pwm::SetDutyCycle`]) | [`pwm`] |
 //! | [`Pca9685`] | NXP PCA9685 16-channel PWM over [`embedded_hal::i2c::I2c`] | [`pca9685`] |
 //! | [`Maestro`] | Pololu Maestro over a UART ([`embedded_io::Write`]) | [`maestro`] |
+//! | [`bus::BusServos`] | Dynamixel (Protocol 2.0) or Feetech SCS/STS bus servos on a half-duplex UART | [`bus`], [`dynamixel`], [`feetech`] |
 //!
-//! All three implement [`ServoOutput`]. A target of `0` means "no pulse" on
-//! every back-end (the Maestro's own convention): the channel goes limp.
+//! [`serial::UartServos`] drives whichever UART back-end a rig names
+//! ([`serial::Serial::for_output`]); [`support`] says which back-ends each
+//! board has. All of them implement [`ServoOutput`]. A target of `0` means
+//! "no pulse" on every back-end (the Maestro's own convention): the channel
+//! goes limp (a bus servo's torque goes off).
 //!
 //! ## Frame rate and decimation
 //!
@@ -31,13 +35,19 @@
 //! than `embedded_io::Write::write_all` (which panics when a writer returns
 //! `Ok(0)`), and every count saturates instead of overflowing.
 
+pub mod bus;
+pub mod dynamixel;
+pub mod feetech;
 pub mod maestro;
 pub mod pca9685;
 pub mod pwm;
+pub mod serial;
+pub mod support;
 
 pub use maestro::Maestro;
 pub use pca9685::Pca9685;
 pub use pwm::Pwm;
+pub use support::{Refusal, Support};
 
 /// The lowest servo frame rate an output accepts, Hz (a 20 ms period).
 pub const FRAME_HZ_MIN: u32 = 50;

@@ -23,13 +23,16 @@ use marionette_core::frame::{Cycles, Region, stage};
 use marionette_core::goal::{Goal, GoalSet, Target};
 use marionette_core::grid::{Axis, Grid, Query, SliceSamples};
 use marionette_core::math;
+use marionette_core::output::ServoOutput;
+use marionette_core::output::serial::{Serial, UartServos};
 use marionette_core::pose::{LocalPose, Pose};
+use marionette_core::rig::{FeetechSeries, Output, ServoDesc};
 use marionette_core::solve::{self, Method, Solver, SolverState};
 use marionette_core::wire::{
-    self, Command, CommandKind, List, MAX_FRAME, Message, Sensor, TrackerFrame,
+    self, Command, CommandKind, CompactFrame, List, MAX_FRAME, Message, Sensor, TrackerFrame,
 };
 use marionette_firmware::app::{self, BoardPerformer};
-use marionette_firmware::board::qemu::exit;
+use marionette_firmware::board::qemu::{CmsdkUart, UART1_BASE, exit};
 use marionette_firmware::console::Line;
 use marionette_firmware::icount::Counter;
 use marionette_firmware::{region, stack};
@@ -295,7 +298,8 @@ fn feed(performer: &mut BoardPerformer<'_, '_>, msg: &Message, now_us: u32) {
     }
 }
 
-/// A tracker frame: the right hand circling, left hand and pelvis still.
+/// A tracker frame, compact (as hosts send them by default): the right
+/// hand circling, left hand and pelvis still.
 fn tracker_frame(i: u32) -> Message {
     let a = i as f32 * 0.05;
     let sensor = |id, position| Sensor {
@@ -310,23 +314,69 @@ fn tracker_frame(i: u32) -> Message {
     ));
     let _ = sensors.push(sensor(1, [0.3, -0.2, 0.1]));
     let _ = sensors.push(sensor(2, [0.0, 0.0, 0.0]));
-    Message::TrackerFrame(TrackerFrame {
+    let frame = TrackerFrame {
         seq: i + 1,
         time_us: i * 1000,
         sensors,
-    })
+    };
+    match CompactFrame::pack(&frame) {
+        Ok(c) => Message::CompactFrame(c),
+        Err(_) => Message::TrackerFrame(frame),
+    }
+}
+
+/// The names of a back-end's rows: sending a frame, and the frame with it.
+type Names = (&'static str, &'static str);
+
+/// The servo outputs of the frame rows: each UART back-end on UART1, for the
+/// region's servos.
+fn uart_outputs(rig_servos: &[ServoDesc]) -> [(Names, UartServos<CmsdkUart>); 3] {
+    let on = |output: Output| UartServos {
+        uart: CmsdkUart::new(UART1_BASE),
+        serial: Serial::for_output(&output, rig_servos).unwrap_or(Serial::None),
+    };
+    [
+        (
+            (
+                "frame.humanoid16.emit.maestro",
+                "frame.humanoid16.total.maestro",
+            ),
+            on(Output::Maestro { baud: 115_200 }),
+        ),
+        (
+            (
+                "frame.humanoid16.emit.dynamixel",
+                "frame.humanoid16.total.dynamixel",
+            ),
+            on(Output::Dynamixel { baud: 1_000_000 }),
+        ),
+        (
+            (
+                "frame.humanoid16.emit.feetech",
+                "frame.humanoid16.total.feetech",
+            ),
+            on(Output::Feetech {
+                baud: 1_000_000,
+                series: FeetechSeries::Sts,
+            }),
+        ),
+    ]
 }
 
 /// The whole live loop per tracker frame on the table region's rig
 /// (`humanoid16`, 3 parameters, 4 goals), by stage, at the `perform`
-/// firmware's capacity.
+/// firmware's capacity; then, per UART back-end, sending the frame's
+/// targets on UART1 (`emit.*`) and the frame with it (`total.*`).
 fn frame_rows(counter: &mut Counter) {
     let region = Region::<{ app::SEGMENTS }>::parse_sized(region::tables());
     let mut solver = SolverState::new();
-    let Some(mut performer) = BoardPerformer::new(&region, &mut solver) else {
+    let mut performer = BoardPerformer::new(&region, &mut solver);
+    if performer.pipeline().is_none() {
         Line::new().str("frame: no rig in the table region").print();
         return;
-    };
+    }
+    let servos = region.rig.as_ref().map_or(&[][..], |r| r.servos());
+    let mut outputs = uart_outputs(servos);
     feed(
         &mut performer,
         &Message::Command(Command {
@@ -336,13 +386,22 @@ fn frame_rows(counter: &mut Counter) {
         0,
     );
     feed(&mut performer, &tracker_frame(0), 0);
+    // The first write switches the bus servos' torque on: not a steady frame.
+    for (_, out) in &mut outputs {
+        let _ = out.write(performer.targets());
+    }
     let mut sums = [0u32; 6];
+    let mut emits = [0u32; 3];
     let mut outer = 0u32;
     for i in 1..FRAMES {
         let msg = tracker_frame(i);
         outer = outer.saturating_add(counter.ticks(|| feed(&mut performer, &msg, i * 1000)));
         for (sum, s) in sums.iter_mut().zip(performer.stages()) {
             *sum = sum.saturating_add(s);
+        }
+        let targets = performer.targets();
+        for (sum, (_, out)) in emits.iter_mut().zip(&mut outputs) {
+            *sum = sum.saturating_add(counter.ticks(|| out.write(black_box(targets)).is_ok()));
         }
     }
     let n = (FRAMES - 1) as usize;
@@ -358,6 +417,11 @@ fn frame_rows(counter: &mut Counter) {
         report(name, "-", n, sums.get(index).copied().unwrap_or(0));
     }
     report("frame.humanoid16.receive", "-", n, outer);
+    let total = sums.get(stage::TOTAL).copied().unwrap_or(0);
+    for (((emit_name, total_name), _), emit) in outputs.iter().zip(emits) {
+        report(emit_name, "-", n, emit);
+        report(total_name, "-", n, total.saturating_add(emit));
+    }
     Line::new()
         .str("frame armed ")
         .u32(u32::from(performer.armed()))

@@ -33,7 +33,7 @@ fn main() -> ! {
             break;
         }
         let _ = tracker.write_all(&[b]);
-        let _ = servo.write_all(&[!b]);
+        let _ = servo.uart.write_all(&[!b]);
     }
     let tables = board.tables();
     let mut line = Line::new();

@@ -4,7 +4,11 @@
 //! | link | peripheral | pins (AF7) | rate |
 //! |---|---|---|---|
 //! | tracker | USART1 (APB2, 100 MHz) | PA9 TX, PA10 RX | 921 600 bit/s (−0.45 %) |
-//! | servo bus (Pololu Maestro) | USART2 (APB1, 50 MHz) | PA2 TX, PA3 RX | 115 200 bit/s (+0.01 %) |
+//!
+//! The servo outputs are whichever back-end the rig names, chosen at run
+//! time ([`servo`]): a Pololu Maestro or bus servos on USART2 (PA2), a
+//! PCA9685 on I2C1 ([`i2c`]: PB6, PB7), or timer PWM on TIM2..TIM4
+//! ([`timers`], 12 channels).
 //!
 //! Everything is programmed through the PAC with compile-time constants
 //! ([`clock`], [`uart`], [`watchdog`]): the HAL's clock and serial set-up keep
@@ -17,12 +21,18 @@
 //! set). Time comes from the DWT cycle counter.
 
 pub mod clock;
+pub mod i2c;
 pub mod rtt;
+pub mod servo;
+pub mod timers;
 pub mod uart;
 pub mod watchdog;
 
 use super::{Board, Outcome};
 use cortex_m::peripheral::DWT;
+use marionette_core::output::support::UartRate;
+use marionette_core::output::{Refusal, Support};
+use marionette_core::rig::{Output, ServoDesc};
 use stm32f4::stm32f411 as pac;
 use uart::{Uart, divisor, divisor_error_permille};
 use watchdog::Watchdog;
@@ -32,16 +42,17 @@ pub use watchdog::TIMEOUT_MS as WATCHDOG_MS;
 
 /// Tracker link rate, bit/s.
 pub const TRACKER_BAUD: u32 = 921_600;
-/// Servo bus rate, bit/s (the Maestro detects it from the first byte).
-pub const SERVO_BAUD: u32 = 115_200;
 
 const TRACKER_BRR: u16 = divisor(clock::PCLK2_HZ, TRACKER_BAUD);
-const SERVO_BRR: u16 = divisor(clock::PCLK1_HZ, SERVO_BAUD);
 // Both ends of a UART link tolerate a few percent in total; keep ours under 1 %.
 const _: () = assert!(divisor_error_permille(clock::PCLK2_HZ, TRACKER_BAUD, TRACKER_BRR) < 10);
-const _: () = assert!(divisor_error_permille(clock::PCLK1_HZ, SERVO_BAUD, SERVO_BRR) < 10);
 // 16× oversampling needs USARTDIV >= 1.
-const _: () = assert!(TRACKER_BRR >= 16 && SERVO_BRR >= 16);
+const _: () = assert!(TRACKER_BRR >= 16);
+// The core's description of this board: USART2 on PCLK1.
+const _: () = assert!(matches!(
+    Support::BLACKPILL.uart,
+    UartRate::Clock(clock::PCLK1_HZ)
+));
 
 /// DWT cycles per microsecond.
 const CYCLES_PER_US: u32 = SYSCLK_HZ / 1_000_000;
@@ -165,7 +176,7 @@ fn route_pins(gpioa: &pac::GPIOA) {
 /// The Black Pill board.
 pub struct BlackPill {
     tracker: Uart<pac::USART1>,
-    servo: Uart<pac::USART2>,
+    servo: servo::Servos,
     watchdog: Watchdog,
     micros: Micros,
     reset_cause: ResetCause,
@@ -185,13 +196,23 @@ impl BlackPill {
         cp.DWT.enable_cycle_counter();
 
         dp.RCC.ahb1enr().modify(|_, w| w.gpioaen().enabled());
-        dp.RCC.apb1enr().modify(|_, w| w.usart2en().enabled());
+        servo::enable_clocks(&dp.RCC);
         dp.RCC.apb2enr().modify(|_, w| w.usart1en().enabled());
         // Read back: a peripheral's registers need two bus cycles after its clock is enabled.
         let _ = dp.RCC.apb2enr().read();
         route_pins(&dp.GPIOA);
         let tracker = Uart::new(dp.USART1, TRACKER_BRR);
-        let servo = Uart::new(dp.USART2, SERVO_BRR);
+        let buffer = cortex_m::singleton!(: [u8; servo::TX_BUFFER] = [0; servo::TX_BUFFER])
+            .ok_or(InitError::Taken)?;
+        let servo = servo::Servos::new(servo::Parts {
+            usart2: dp.USART2,
+            dma1: dp.DMA1,
+            i2c1: dp.I2C1,
+            timers: (dp.TIM2, dp.TIM3, dp.TIM4),
+            gpioa: dp.GPIOA,
+            gpiob: dp.GPIOB,
+            buffer,
+        });
 
         // Keep the watchdog from resetting the chip while a debugger halts it.
         dp.DBGMCU
@@ -223,16 +244,23 @@ impl BlackPill {
 
 impl Board for BlackPill {
     type Tracker = Uart<pac::USART1>;
-    type ServoBus = Uart<pac::USART2>;
+    type Servos = servo::Servos;
 
-    fn links(&mut self) -> (&mut Self::Tracker, &mut Self::ServoBus) {
+    fn links(&mut self) -> (&mut Self::Tracker, &mut Self::Servos) {
         (&mut self.tracker, &mut self.servo)
     }
 
-    /// A Maestro at [`SERVO_BAUD`] (the rate USART2 is programmed for).
-    fn supports(&self, output: &marionette_core::rig::Output) -> bool {
-        matches!(output, marionette_core::rig::Output::Maestro { baud } if *baud == SERVO_BAUD)
+    fn open_servos(&mut self, output: &Output, servos: &[ServoDesc]) -> Result<(), Refusal> {
+        self.servo.open(output, servos)
     }
+
+    fn servos_ready(&mut self) -> bool {
+        let now = self.micros.update();
+        self.servo.ready(now)
+    }
+
+    /// Every back-end: UART (Maestro, Dynamixel, Feetech), PCA9685, PWM.
+    const SUPPORT: Support = Support::BLACKPILL;
 
     fn tables(&self) -> &'static [u8] {
         crate::region::tables()
@@ -253,7 +281,7 @@ impl Board for BlackPill {
     }
 
     fn finish(&mut self, outcome: Outcome) -> ! {
-        let _ = embedded_io::Write::flush(&mut self.servo);
+        self.servo.flush();
         defmt::warn!(
             "session ended: status {}, {} log frames dropped",
             outcome.exit_status(),

@@ -1,7 +1,11 @@
 //! The emulated board: QEMU `mps2-an386` (Cortex-M4F at 25 MHz).
 //!
 //! - UART0 (0x4000_4000) is the tracker link, UART1 (0x4000_5000) the servo bus;
-//!   the i-th `-serial` option of QEMU is UART i.
+//!   the i-th `-serial` option of QEMU is UART i. UART1 drives whichever UART
+//!   back-end the rig names (Pololu Maestro, Dynamixel, Feetech: the core's
+//!   [`UartServos`]) at any baud rate (the emulated UART moves bytes, not
+//!   bits); the board has no I2C device and no timer pins, so PCA9685 and
+//!   PWM rigs are refused ([`Support::EMULATED`]).
 //! - CMSDK APB timer 0 (0x4000_0000) is a free-running 25 MHz down-counter
 //!   used for [`Board::now_us`].
 //! - Semihosting gives the exit status.
@@ -9,6 +13,9 @@
 use super::{Board, Outcome};
 use core::convert::Infallible;
 use core::ptr::{read_volatile, write_volatile};
+use marionette_core::output::serial::{Serial, UartServos};
+use marionette_core::output::{Refusal, Support};
+use marionette_core::rig::{Output, ServoDesc};
 
 /// Base address of CMSDK UART0 (tracker link).
 pub const UART0_BASE: usize = 0x4000_4000;
@@ -133,7 +140,7 @@ impl Clock {
 /// The emulated `mps2-an386` board.
 pub struct Qemu {
     tracker: CmsdkUart,
-    servo: CmsdkUart,
+    servo: UartServos<CmsdkUart>,
     clock: Clock,
 }
 
@@ -143,7 +150,10 @@ impl Qemu {
     pub fn init() -> Self {
         Self {
             tracker: CmsdkUart::new(UART0_BASE),
-            servo: CmsdkUart::new(UART1_BASE),
+            servo: UartServos {
+                uart: CmsdkUart::new(UART1_BASE),
+                serial: Serial::None,
+            },
             clock: Clock::start(),
         }
     }
@@ -156,10 +166,18 @@ pub fn exit(status: i32) -> ! {
 
 impl Board for Qemu {
     type Tracker = CmsdkUart;
-    type ServoBus = CmsdkUart;
+    type Servos = UartServos<CmsdkUart>;
 
-    fn links(&mut self) -> (&mut CmsdkUart, &mut CmsdkUart) {
+    fn links(&mut self) -> (&mut CmsdkUart, &mut UartServos<CmsdkUart>) {
         (&mut self.tracker, &mut self.servo)
+    }
+
+    fn open_servos(&mut self, output: &Output, servos: &[ServoDesc]) -> Result<(), Refusal> {
+        self.servo.serial = Serial::for_output(output, servos).ok_or(Refusal::Backend {
+            kind: marionette_core::output::support::kind_name(output),
+            board: Self::SUPPORT.board,
+        })?;
+        Ok(())
     }
 
     fn tables(&self) -> &'static [u8] {
@@ -172,16 +190,22 @@ impl Board for Qemu {
 
     fn feed_watchdog(&mut self) {}
 
+    const SUPPORT: Support = Support::EMULATED;
+
     /// Ticks of the 25 MHz timer 0 (under `-icount shift=7`, 3.2 per
     /// instruction).
     fn cycles(&mut self) -> u32 {
         u32::MAX - reg_read(TIMER0_BASE + 0x04)
     }
 
+    fn cycles_hz(&self) -> u32 {
+        SYSCLK_HZ
+    }
+
     const ENDS_ON_DISARM: bool = true;
 
     fn finish(&mut self, outcome: Outcome) -> ! {
-        let _ = embedded_io::Write::flush(&mut self.servo);
+        let _ = embedded_io::Write::flush(&mut self.servo.uart);
         let _ = embedded_io::Write::flush(&mut self.tracker);
         exit(outcome.exit_status())
     }

@@ -121,10 +121,10 @@ pub fn native(inputs: &Inputs, sample: &[u32]) -> Result<Native, CmdError> {
     let mut poses = Vec::new();
     let (mut adjusted, mut failed) = (0, 0);
     let run = perform::simulate_with(&inputs.region, &inputs.session, &mut |p, u| {
-        if let Some(Cause::Frame(seq)) = u.outputs
+        if let (Some(Cause::Frame(seq)), Some(pose)) = (u.outputs, p.pose())
             && sample.contains(&seq)
         {
-            poses.push((seq, *p.pose()));
+            poses.push((seq, *pose));
         }
         adjusted = p.adjusted_frames();
         failed = p.failed_frames();

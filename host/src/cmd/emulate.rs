@@ -31,6 +31,9 @@ pub struct Args {
     /// Send each frame at its recorded time instead of as fast as possible.
     #[arg(long)]
     pub realtime: bool,
+    /// How tracker frames travel: the compact frame (quantized) or `f32`.
+    #[arg(long, value_enum, default_value_t = perform::Framing::Compact)]
+    pub frame: perform::Framing,
     /// Also save the raw servo-bus bytes here.
     #[arg(long)]
     pub raw_servo: Option<PathBuf>,
@@ -50,8 +53,9 @@ pub struct Summary {
     /// with the native replay following the board's fail-safe trips.
     pub mismatches: usize,
     /// Times the board's fail-safe tripped in the middle of the stream (a
-    /// host stall longer than the rig's time-out) and eased towards rest;
-    /// the native replay followed each (see [`perform::follow`]).
+    /// host stall longer than the rig's time-out) and eased towards rest,
+    /// as the board reported them; the native replay followed each (see
+    /// [`perform::follow`]).
     pub failsafe_trips: usize,
     /// Easing steps to rest after the session.
     pub rest_steps: usize,
@@ -94,7 +98,7 @@ pub fn compare(
         .chain(&board.rest_targets)
         .cloned()
         .collect();
-    let followed = perform::follow(&inputs.region, &inputs.session, &sent)?;
+    let followed = perform::follow(&inputs.region, &inputs.session, &sent, &board.replies)?;
     let csv = out.join("servo_emulated.csv");
     sim::write_servo_csv(&csv, inputs, &board)?;
     let summary = Summary {
@@ -113,7 +117,12 @@ pub fn compare(
 
 /// Runs the performance and prints its summary.
 pub fn run(args: &Args) -> Result<(), CmdError> {
-    let inputs = sim::load(&args.rig, args.tables.as_deref(), &args.recording)?;
+    let inputs = sim::load_with(
+        &args.rig,
+        args.tables.as_deref(),
+        &args.recording,
+        args.frame,
+    )?;
     let pacing = if args.realtime {
         Pacing::RealTime
     } else {

@@ -1,12 +1,23 @@
-//! `marionette flash`: the firmware ELF and/or the table blob onto the board
-//! with probe-rs (see [`crate::flash`] for the plan and its checks).
+//! `marionette flash`: the firmware ELF and/or the table region (rig +
+//! tables) onto the board with probe-rs (see [`crate::flash`] for the plan
+//! and its checks).
 //!
-//! `--dry-run` uses no probe: it prints the plan and checks it against the
-//! board layout and the chip's built-in memory map.
+//! The table region is either a region image (`region.bin` of `marionette
+//! demo` or `emulate`), or made here from `--rig RIG.toml` and a table blob
+//! of `marionette build` with the core's region writer. Before anything is
+//! written it is read as the board will read it, and refused with the
+//! board's reason if the board would not arm with it (`--no-check` flashes
+//! it anyway). After writing, the region is read back and checked again.
+//!
+//! `--dry-run` uses no probe: it prints the plan, checks it against the
+//! board layout and the chip's built-in memory map, and shows what the board
+//! would read (the bytes probe-rs stages, over erased flash).
 
 use super::CmdError;
 use crate::flash::{self, BLACKPILL, DEFAULT_CHIP, FlashError, Options};
+use crate::{perform, rigfile};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use marionette_core::{region, table};
 use probe_rs::flashing::{ProgressEvent, ProgressOperation};
 use std::path::{Path, PathBuf};
 
@@ -16,10 +27,14 @@ pub struct Args {
     /// Firmware ELF (goes to the firmware region, 0x0800_0000).
     #[arg(long)]
     pub elf: Option<PathBuf>,
-    /// Table blob from `marionette build` (goes to the table region,
-    /// 0x0804_0000, 256 KiB).
+    /// The table region (0x0804_0000, 256 KiB): a region image (rig +
+    /// tables, `region.bin` of `demo` or `emulate`), or with `--rig` a table
+    /// blob from `marionette build`.
     #[arg(long)]
     pub tables: Option<PathBuf>,
+    /// Rig file: the region is made of this rig and the `--tables` blob.
+    #[arg(long)]
+    pub rig: Option<PathBuf>,
     /// probe-rs chip name.
     #[arg(long, default_value = DEFAULT_CHIP)]
     pub chip: String,
@@ -29,7 +44,7 @@ pub struct Args {
     /// Read the flash back after writing and compare.
     #[arg(long)]
     pub verify: bool,
-    /// Flash a blob even if it does not parse as a table.
+    /// Flash the region even if the board would not arm with it.
     #[arg(long)]
     pub no_check: bool,
     /// Leave the core halted after flashing firmware (default: reset and run).
@@ -41,10 +56,38 @@ fn read(path: &Path) -> Result<Vec<u8>, CmdError> {
     std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()).into())
 }
 
+/// The table region image to flash: the file as given, or (with `--rig`)
+/// the rig and the table blob laid out by the core.
+fn region_image(args: &Args) -> Result<Option<Vec<u8>>, CmdError> {
+    let tables = args.tables.as_deref().map(read).transpose()?;
+    let Some(rig_path) = &args.rig else {
+        return Ok(tables);
+    };
+    let rig = rigfile::load(rig_path).map_err(|e| e.to_string())?;
+    let rig_blob = rigfile::to_blob(&rig).map_err(|e| e.to_string())?;
+    if let Some(t) = &tables
+        && t.get(..4) != Some(&table::MAGIC[..])
+    {
+        return Err(format!(
+            "{}: with --rig, --tables takes a table blob of `marionette build` (this is {})",
+            args.tables
+                .as_deref()
+                .map_or_else(String::new, |p| p.display().to_string()),
+            if region::directory(t).is_ok() {
+                "already a region"
+            } else {
+                "not a table blob"
+            }
+        )
+        .into());
+    }
+    Ok(Some(perform::region(&rig_blob, tables.as_deref())))
+}
+
 /// Plans, checks, and (unless `--dry-run`) writes.
 pub fn run(args: &Args) -> Result<(), CmdError> {
     let elf = args.elf.as_deref().map(read).transpose()?;
-    let tables = args.tables.as_deref().map(read).transpose()?;
+    let tables = region_image(args)?;
     let plan = flash::plan(
         &BLACKPILL,
         elf.as_deref(),
@@ -52,12 +95,19 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         !args.no_check,
     )
     .map_err(|e| match e {
-        FlashError::BadTables(_) => format!("{e} (--no-check flashes it anyway)").into(),
+        FlashError::WouldNotArm { .. } => format!("{e} (--no-check flashes it anyway)").into(),
         e => CmdError::from(e),
     })?;
     println!("{plan}");
+    if let (Some(t), false) = (&tables, args.no_check) {
+        println!("board view: {}", flash::check_region(&BLACKPILL, t)?);
+    }
     flash::check_chip(&plan, &args.chip)?;
     if args.dry_run {
+        report(
+            flash::dry_read_back(&plan, &args.chip)?.as_ref(),
+            args.no_check,
+        )?;
         println!(
             "dry run: the plan fits the board layout and {}'s memory map; no probe used, \
              nothing written",
@@ -71,8 +121,9 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         verify: args.verify,
         dry_run: false,
     };
-    flash::program(&mut session, &plan, options, |e| bars.event(e))?;
+    let read_back = flash::program(&mut session, &plan, options, |e| bars.event(e))?;
     bars.finish();
+    report(read_back.as_ref(), args.no_check)?;
     if plan.has_firmware() && !args.no_reset {
         session
             .core(0)
@@ -85,6 +136,25 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         args.chip,
         if args.verify { ", verified" } else { "" }
     );
+    Ok(())
+}
+
+/// Prints what the board reads back; an error if it would not arm (unless
+/// `--no-check`).
+fn report(read_back: Option<&flash::ReadBack>, no_check: bool) -> Result<(), CmdError> {
+    let Some(rb) = read_back else {
+        return Ok(());
+    };
+    let source = if rb.staged {
+        "staged bytes over erased flash"
+    } else {
+        "read from the chip"
+    };
+    match (&rb.verdict, no_check) {
+        (Ok(armed), _) => println!("read back ({source}): {armed}"),
+        (Err(e), true) => println!("read back ({source}): {e}"),
+        (Err(e), false) => return Err(format!("read back ({source}): {e}").into()),
+    }
     Ok(())
 }
 

@@ -12,8 +12,13 @@
 //!   resampled to `--rate-hz` (default 1000, the humanoid16 rig's frame
 //!   rate): positions linearly, rotations by slerp, between the two nearest
 //!   mocap frames;
-//! - positions are world metres as the mocap has them, rounded to 0.1 mm,
-//!   rotations rounded to 1e-5 (a tracker's resolution, and a small file).
+//! - positions are world metres as the mocap has them. By default each
+//!   sample is what the compact tracker frame carries (`wire::compact`:
+//!   positions in steps of 2⁻¹³ m, rotations in smallest-three 11-bit
+//!   components), written exactly (each `f32` as the shortest decimal that
+//!   reads back as the same `f32`), so the recording is what a board
+//!   receives; with `--frame f32`, positions are rounded to 0.1 mm and
+//!   rotations to 1e-5 (a tracker's resolution, and a small file).
 //!
 //! Without `--sensor`, the trackers of the humanoid16 rig: 0 = the right
 //! palm, 1 = the left palm, 2 = the pelvis (the root joint, which turns
@@ -24,7 +29,9 @@
 use super::CmdError;
 use crate::import::csv::{HEADER, TrackerSample};
 use crate::import::{self, Motion};
+use crate::perform::Framing;
 use glam::{DQuat, DVec3};
+use marionette_core::wire::{Sensor, compact};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `marionette record`.
@@ -53,6 +60,10 @@ pub struct Args {
     /// The CSV to write.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// The precision of the samples: what the compact tracker frame
+    /// carries, or 0.1 mm and 1e-5 (`f32`).
+    #[arg(long, value_enum, default_value_t = Framing::Compact)]
+    pub frame: Framing,
 }
 
 /// One virtual tracker.
@@ -154,6 +165,57 @@ pub fn write_csv<W: std::io::Write>(mut out: W, samples: &[TrackerSample]) -> st
         let (p, q) = (s.position, s.orientation);
         let pos = [p.x, p.y, p.z].map(|c| fixed(c, 4));
         let rot = [q.w, q.x, q.y, q.z].map(|c| fixed(c, 5));
+        writeln!(
+            out,
+            "{},{},{},{}",
+            s.time_us,
+            s.sensor,
+            pos.join(","),
+            rot.join(",")
+        )?;
+    }
+    out.flush()
+}
+
+/// Each sample as the compact tracker frame carries it (a position outside
+/// its ±4 m is kept as is: such a frame travels as `f32`).
+#[must_use]
+pub fn snap_compact(samples: &[TrackerSample]) -> Vec<TrackerSample> {
+    samples
+        .iter()
+        .map(|s| {
+            let (p, q) = (s.position.as_vec3(), s.orientation.as_quat());
+            let sensor = Sensor {
+                id: s.sensor,
+                position: p.to_array(),
+                rotation: [q.w, q.x, q.y, q.z],
+            };
+            let Ok(back) = compact::pack_sensor(&sensor).and_then(|b| compact::unpack_sensor(&b))
+            else {
+                return *s;
+            };
+            TrackerSample {
+                position: back.position().as_dvec3(),
+                orientation: back.rotation().as_dquat(),
+                ..*s
+            }
+        })
+        .collect()
+}
+
+/// Writes samples as a tracker CSV with every value exactly as its `f32`
+/// (the shortest decimal of its exact `f64` value: it reads back as the same
+/// `f32`).
+pub fn write_csv_exact<W: std::io::Write>(
+    mut out: W,
+    samples: &[TrackerSample],
+) -> std::io::Result<()> {
+    writeln!(out, "{}", HEADER.join(","))?;
+    for s in samples {
+        let (p, q) = (s.position, s.orientation);
+        let exact = |x: f64| f64::from(x as f32).to_string();
+        let pos = [p.x, p.y, p.z].map(exact);
+        let rot = [q.w, q.x, q.y, q.z].map(exact);
         writeln!(
             out,
             "{},{},{},{}",
@@ -284,8 +346,12 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     }
     let file = std::fs::File::create(&args.output)
         .map_err(|e| format!("{}: {e}", args.output.display()))?;
-    write_csv(std::io::BufWriter::new(file), &samples)
-        .map_err(|e| format!("{}: {e}", args.output.display()))?;
+    let out = std::io::BufWriter::new(file);
+    match args.frame {
+        Framing::Compact => write_csv_exact(out, &snap_compact(&samples)),
+        Framing::F32 => write_csv(out, &samples),
+    }
+    .map_err(|e| format!("{}: {e}", args.output.display()))?;
     let frames = samples.len() / trackers.len().max(1);
     println!(
         "{}: {} sensors x {} samples at {} Hz ({:.3} s) from {} ({} frames)",
@@ -371,6 +437,25 @@ mod tests {
             assert_eq!((a.time_us, a.sensor), (b.time_us, b.sensor));
             assert!((a.position - b.position).length() < 1e-9);
             assert!(a.orientation.dot(b.orientation.normalize()).abs() > 1.0 - 1e-9);
+        }
+    }
+
+    /// A compact recording reads back as exactly the values the compact
+    /// frame carries: encoding its `f32`s again gives the same bytes.
+    #[test]
+    fn compact_recordings_are_what_the_board_receives() {
+        let s = record(&motion(), &[Tracker::parse("0=arm+tip").unwrap()], 40.0, 0).unwrap();
+        let snapped = snap_compact(&s);
+        let mut text = Vec::new();
+        write_csv_exact(&mut text, &snapped).unwrap();
+        let back = crate::import::csv::parse_tracker_csv(text.as_slice(), "t.csv").unwrap();
+        let frames = crate::perform::frames(&back).unwrap();
+        for (f, orig) in frames.iter().zip(&s) {
+            let sensor = f.sensors.as_slice()[0];
+            let bytes = compact::pack_sensor(&sensor).unwrap();
+            let got = compact::unpack_sensor(&bytes).unwrap();
+            assert_eq!(got.position().to_array(), sensor.position);
+            assert!((got.position().as_dvec3() - orig.position).length() < 1e-4);
         }
     }
 

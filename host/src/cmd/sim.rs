@@ -1,12 +1,13 @@
 //! `marionette sim`: the live loop run natively on a recording.
 //!
 //! Reads a rig file, a table blob and a tracker recording
-//! (`time_us,sensor,x,y,z,qw,qx,qy,qz`), runs the session through the core's
-//! `Performer` exactly as the firmware would, and writes the servo targets
-//! per frame as CSV (`time_us,ch0,…` in µs).
+//! (`time_us,sensor,x,y,z,qw,qx,qy,qz`), encodes the session as a host
+//! would send it (compact tracker frames unless `--frame f32`), runs the
+//! bytes through the core's `Performer` exactly as the firmware would, and
+//! writes the servo targets per frame as CSV (`time_us,ch0,…` in µs).
 
 use super::CmdError;
-use crate::perform::{self, Run};
+use crate::perform::{self, Framing, Run};
 use crate::{import, rigfile};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -26,6 +27,9 @@ pub struct Args {
     /// Where to write `servo.csv`.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
+    /// How tracker frames travel: the compact frame (quantized) or `f32`.
+    #[arg(long, value_enum, default_value_t = Framing::Compact)]
+    pub frame: Framing,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
@@ -62,8 +66,19 @@ pub struct Inputs {
     pub period_us: u32,
 }
 
-/// Loads the rig, tables and recording into a region image and a session.
+/// Loads the rig, tables and recording into a region image and a session
+/// (compact frames).
 pub fn load(rig: &Path, tables: Option<&Path>, recording: &Path) -> Result<Inputs, CmdError> {
+    load_with(rig, tables, recording, Framing::Compact)
+}
+
+/// [`load`] with the tracker frames framed as `framing` says.
+pub fn load_with(
+    rig: &Path,
+    tables: Option<&Path>,
+    recording: &Path,
+    framing: Framing,
+) -> Result<Inputs, CmdError> {
     let rig = rigfile::load(&rigfile::resolve(rig))?;
     let rig_blob = rigfile::to_blob(&rig)?;
     let table_blob = match tables {
@@ -74,7 +89,7 @@ pub fn load(rig: &Path, tables: Option<&Path>, recording: &Path) -> Result<Input
     let frames = perform::frames(&samples)?;
     Ok(Inputs {
         region: perform::region(&rig_blob, table_blob.as_deref()),
-        session: perform::session(&frames)?,
+        session: perform::session_with(&frames, framing)?,
         frames: frames.len(),
         times: frames.iter().map(|f| f.time_us).collect(),
         period_us: rig.desc().frame_period_us,
@@ -126,7 +141,12 @@ pub fn ranges(run: &Run) -> Vec<[f64; 2]> {
 
 /// Runs the session natively and writes the servo curves.
 pub fn run(args: &Args) -> Result<(), CmdError> {
-    let inputs = load(&args.rig, args.tables.as_deref(), &args.recording)?;
+    let inputs = load_with(
+        &args.rig,
+        args.tables.as_deref(),
+        &args.recording,
+        args.frame,
+    )?;
     let run = perform::simulate(&inputs.region, &inputs.session)?;
     let csv = args.out.join("servo_sim.csv");
     write_servo_csv(&csv, &inputs, &run)?;

@@ -175,7 +175,10 @@ fn encode_set_multiple(targets: &[u16], buf: &mut [u8; 4 * MAX_CHANNELS]) -> usi
 
 /// `write` until `bytes` are all taken; unlike `Write::write_all`, a writer
 /// that takes nothing is an error, not a panic.
-fn write_all<W: Write>(uart: &mut W, mut bytes: &[u8]) -> Result<(), OutputError<W::Error>> {
+pub(super) fn write_all<W: Write>(
+    uart: &mut W,
+    mut bytes: &[u8],
+) -> Result<(), OutputError<W::Error>> {
     while !bytes.is_empty() {
         match uart.write(bytes) {
             Ok(0) => return Err(OutputError::WriteZero),

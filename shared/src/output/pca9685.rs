@@ -20,17 +20,22 @@
 //! 1. MODE1 ← `0x11` (SLEEP | ALLCALL): stops the oscillator, even when the chip
 //!    kept running through a reset of the microcontroller;
 //! 2. PRE_SCALE ← the prescale;
-//! 3. MODE1 ← `0x01` (ALLCALL): wakes the oscillator;
-//! 4. waits 500 µs, the datasheet's oscillator start-up time, before any PWM
+//! 3. MODE1 ← `0x31` (AI | SLEEP | ALLCALL): auto-increment on;
+//! 4. ALL_LED_OFF_L, _H (`0xFC`, `0xFD`) ← `00 10`: every output full off, so
+//!    that nothing moves before the first frame (the chip's own reset state,
+//!    made sure of when it kept old values through a reset of the board);
+//! 5. MODE1 ← `0x21` (AI | ALLCALL): wakes the oscillator;
+//! 6. waits 500 µs, the datasheet's oscillator start-up time, before any PWM
 //!    register is written.
 //!
-//! The first [`ServoOutput::write`] then sets MODE1 ← `0x21` (AI | ALLCALL)
-//! once, and every write sends, per channel `n`, one transaction
-//! `[0x06 + 4n, 0x00, 0x00, off & 0xFF, off >> 8]` (on at count 0, off at
-//! `off`), or `[0x08 + 4n, 0x00, 0x10]` (full off) for a target of 0.
-//! Writing the PWM registers also clears a pending RESTART, so no explicit
-//! restart is needed after waking.
-//!
+//! Every [`ServoOutput::write`] then sends **one auto-increment burst** of 65
+//! bytes: the register address `0x06` (LED0_ON_L) and, for each of the 16
+//! channels `n`, `on_l on_h off_l off_h` = `00 00 (off & 0xFF) (off >> 8)`
+//! (on at count 0, off at `off`), or `00 00 00 10` (bit 4 of LEDn_OFF_H:
+//! full off) for a target of 0 and for the channels past the end of the
+//! frame. Writing the PWM registers also clears a pending RESTART, so no
+//! explicit restart is needed after waking.
+
 //! ## Counts
 //!
 //! One tick lasts `(prescale + 1) / osc` seconds, so a target of `q`
@@ -45,15 +50,16 @@
 //!
 //! ## Bus time
 //!
-//! Each channel is one transaction of 6 bytes (address included) of 9 clocks
-//! each, about 56 clocks: 140 µs at 400 kHz, 2.2 ms for 16 channels. Decimate
-//! to the PWM frame rate ([`super::Decimated`]).
+//! A frame is one transaction of 66 bytes (address included) of 9 clocks
+//! each, 594 clocks: 1.49 ms at 400 kHz. The chip starts a new pulse once per
+//! period (20 ms at 50 Hz, 2.5 ms at 400 Hz), so a board writes at most once
+//! a period ([`super::Decimated`], or its own clock).
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::I2c;
-use pwm_pca9685::{Channel, Error as DriverError, Pca9685 as Driver};
+use pwm_pca9685::{Channel, ChannelOnOffControl, Error as DriverError, Pca9685 as Driver};
 
-use super::{ConfigError, OutputError, ServoOutput, check_frame_rate};
+use super::{ConfigError, OutputError, ServoOutput};
 
 /// The internal oscillator's nominal frequency, Hz.
 pub const OSCILLATOR_HZ: u32 = 25_000_000;
@@ -63,6 +69,19 @@ pub const CHANNELS: usize = 16;
 pub const COUNT_MAX: u16 = 4095;
 /// The oscillator start-up time after SLEEP is cleared, µs.
 pub const WAKE_US: u32 = 500;
+/// The lowest servo frame rate, Hz.
+pub const FRAME_HZ_MIN: u32 = 50;
+/// The highest servo frame rate, Hz (a 2.5 ms period).
+pub const FRAME_HZ_MAX: u32 = 400;
+
+/// Checks a frame rate against [`FRAME_HZ_MIN`]..=[`FRAME_HZ_MAX`].
+pub fn check_frame_rate(frame_hz: u32) -> Result<u32, ConfigError> {
+    if (FRAME_HZ_MIN..=FRAME_HZ_MAX).contains(&frame_hz) {
+        Ok(frame_hz)
+    } else {
+        Err(ConfigError::FrameRate(frame_hz))
+    }
+}
 
 /// The prescale for `frame_hz` from an `osc_hz` oscillator:
 /// `round(osc / (4096 · f)) − 1`, which must lie in 3..=255.
@@ -100,7 +119,7 @@ pub struct Pca9685<I2C> {
 
 impl<I2C: I2c> Pca9685<I2C> {
     /// A chip at 7-bit `address` (0x40 with no address pins strapped) driving
-    /// servos at `frame_hz` (50–333 Hz) from the internal oscillator.
+    /// servos at `frame_hz` (50–400 Hz) from the internal oscillator.
     /// Sends nothing: call [`Pca9685::init`] before the first write.
     pub fn new(i2c: I2C, address: u8, frame_hz: u32) -> Result<Self, ConfigError> {
         Self::with_oscillator(i2c, address, frame_hz, OSCILLATOR_HZ)
@@ -129,6 +148,9 @@ impl<I2C: I2c> Pca9685<I2C> {
         self.driver
             .set_prescale(self.prescale)
             .map_err(driver_error)?;
+        self.driver
+            .set_channel_full_off(Channel::All)
+            .map_err(driver_error)?;
         self.driver.enable().map_err(driver_error)?;
         delay.delay_us(WAKE_US);
         Ok(())
@@ -150,26 +172,27 @@ impl<I2C: I2c> Pca9685<I2C> {
 impl<I2C: I2c> ServoOutput for Pca9685<I2C> {
     type Error = OutputError<I2C::Error>;
 
-    /// One transaction per channel; stops at the first error.
+    /// One auto-increment burst for all 16 channels.
     fn write(&mut self, targets: &[u16]) -> Result<(), Self::Error> {
-        let too_many = || OutputError::TooManyTargets {
-            given: targets.len(),
-            channels: CHANNELS,
-        };
         if targets.len() > CHANNELS {
-            return Err(too_many());
+            return Err(OutputError::TooManyTargets {
+                given: targets.len(),
+                channels: CHANNELS,
+            });
         }
-        for (i, &target) in targets.iter().enumerate() {
-            let channel = Channel::try_from(i).map_err(|()| too_many())?;
-            let sent = if target == 0 {
-                self.driver.set_channel_full_off(channel)
-            } else {
-                let off = counts(target, self.osc_hz, self.prescale);
-                self.driver.set_channel_on_off(channel, 0, off)
-            };
-            sent.map_err(driver_error)?;
+        let mut values = [ChannelOnOffControl {
+            on: 0,
+            off: 0,
+            full_on: false,
+            full_off: true,
+        }; CHANNELS];
+        for (v, &target) in values.iter_mut().zip(targets) {
+            if target != 0 {
+                v.off = counts(target, self.osc_hz, self.prescale);
+                v.full_off = false;
+            }
         }
-        Ok(())
+        self.driver.set_all_channels(&values).map_err(driver_error)
     }
 }
 
@@ -223,22 +246,43 @@ mod tests {
         assert_eq!(counts(u16::MAX, OSCILLATOR_HZ, 17), 4095);
     }
 
+    /// The init sequence of the datasheet (module doc) at `addr`.
+    fn init_writes(addr: u8, prescale: u8) -> vec::Vec<I2cT> {
+        vec![
+            I2cT::write(addr, vec![0x00, 0x11]),
+            I2cT::write(addr, vec![0xFE, prescale]),
+            I2cT::write(addr, vec![0x00, 0x31]),
+            I2cT::write(addr, vec![0xFC, 0x00, 0x10]),
+            I2cT::write(addr, vec![0x00, 0x21]),
+        ]
+    }
+
+    /// One burst from LED0_ON_L (0x06): per channel ON_L, ON_H, OFF_L,
+    /// OFF_H; `None` is full off (OFF_H bit 4).
+    fn burst(addr: u8, offs: &[Option<u16>; 16]) -> I2cT {
+        let mut bytes = vec![0x06];
+        for off in offs {
+            match off {
+                Some(c) => bytes.extend_from_slice(&[0, 0, (c & 0xFF) as u8, (c >> 8) as u8]),
+                None => bytes.extend_from_slice(&[0, 0, 0, 0x10]),
+            }
+        }
+        assert_eq!(bytes.len(), 65);
+        I2cT::write(addr, bytes)
+    }
+
     #[test]
     fn init_and_frames_send_the_datasheet_bytes() {
-        let expect = [
-            // init: sleep, prescale 121, wake.
-            I2cT::write(ADDR, vec![0x00, 0x11]),
-            I2cT::write(ADDR, vec![0xFE, 121]),
-            I2cT::write(ADDR, vec![0x00, 0x01]),
-            // first frame: auto-increment on, then LED0 and LED1 on 0 / off
-            // 307 = 0x133 and 205 = 0xCD, LED2 full off (LED2_OFF_L = 0x10).
-            I2cT::write(ADDR, vec![0x00, 0x21]),
-            I2cT::write(ADDR, vec![0x06, 0x00, 0x00, 0x33, 0x01]),
-            I2cT::write(ADDR, vec![0x0A, 0x00, 0x00, 0xCD, 0x00]),
-            I2cT::write(ADDR, vec![0x10, 0x00, 0x10]),
-            // second frame: no MODE1 write; 410 = 0x19A.
-            I2cT::write(ADDR, vec![0x06, 0x00, 0x00, 0x9A, 0x01]),
-        ];
+        // Frame 1: LED0 307 = 0x133, LED1 205 = 0xCD, LED2 off (target 0),
+        // LED3..15 off (past the frame). Frame 2: LED0 410 = 0x19A.
+        let mut f1 = [None; 16];
+        f1[0] = Some(307);
+        f1[1] = Some(205);
+        let mut f2 = [None; 16];
+        f2[0] = Some(410);
+        let mut expect = init_writes(ADDR, 121);
+        expect.push(burst(ADDR, &f1));
+        expect.push(burst(ADDR, &f2));
         let mut delay = CheckedDelay::new(&[Delay::delay_us(500)]);
         let mut out = Pca9685::new(Mock::new(&expect), ADDR, 50).unwrap();
         assert_eq!(out.prescale(), 121);
@@ -253,15 +297,8 @@ mod tests {
     fn sixteen_channels_reach_led15_and_seventeen_are_refused() {
         // 200 Hz at address 0x41: prescale 30 = 0x1E; 1500 µs = 1210 = 0x4BA.
         let addr = 0x41;
-        let mut expect = vec![
-            I2cT::write(addr, vec![0x00, 0x11]),
-            I2cT::write(addr, vec![0xFE, 0x1E]),
-            I2cT::write(addr, vec![0x00, 0x01]),
-            I2cT::write(addr, vec![0x00, 0x21]),
-        ];
-        for n in 0..16u8 {
-            expect.push(I2cT::write(addr, vec![0x06 + 4 * n, 0, 0, 0xBA, 0x04]));
-        }
+        let mut expect = init_writes(addr, 0x1E);
+        expect.push(burst(addr, &[Some(1210); 16]));
         let mut delay = CheckedDelay::new(&[Delay::delay_us(500)]);
         let mut out = Pca9685::new(Mock::new(&expect), addr, 200).unwrap();
         out.init(&mut delay).unwrap();
@@ -273,6 +310,24 @@ mod tests {
                 channels: 16
             })
         );
+        out.release().done();
+        delay.done();
+    }
+
+    #[test]
+    fn four_hundred_hertz_is_the_top() {
+        // 25 MHz / (4096 · 400) = 15.26 -> prescale 14; a tick is
+        // 15 / 25 MHz = 0.6 µs: 1500 µs is 2500 ticks exactly.
+        assert_eq!(prescale(OSCILLATOR_HZ, 400), Ok(14));
+        assert_eq!(counts(6000, OSCILLATOR_HZ, 14), 2500);
+        let mut expect = init_writes(ADDR, 14);
+        let mut f = [None; 16];
+        f[0] = Some(2500);
+        expect.push(burst(ADDR, &f));
+        let mut delay = CheckedDelay::new(&[Delay::delay_us(500)]);
+        let mut out = Pca9685::new(Mock::new(&expect), ADDR, 400).unwrap();
+        out.init(&mut delay).unwrap();
+        out.write(&[6000]).unwrap();
         out.release().done();
         delay.done();
     }
@@ -292,8 +347,8 @@ mod tests {
         for (addr, hz, err) in [
             (0x70, 50, ConfigError::Address(0x70)),
             (0x03, 50, ConfigError::Address(0x03)),
-            (ADDR, 40, ConfigError::FrameRate(40)),
-            (ADDR, 400, ConfigError::FrameRate(400)),
+            (ADDR, 49, ConfigError::FrameRate(49)),
+            (ADDR, 401, ConfigError::FrameRate(401)),
         ] {
             let mut bus = Mock::new(&[]);
             assert_eq!(Pca9685::new(bus.clone(), addr, hz).err(), Some(err));

@@ -11,6 +11,16 @@
 //! computed exactly in `u64`, rounded half up and saturated to `max_duty`.
 //! For example 1500 µs at 50 Hz with `max_duty` 20 000 is duty 1500.
 //!
+//! ## Timer set-up
+//!
+//! [`TimerSetup::new`] picks a timer's prescaler and period for a frame
+//! rate: the smallest clock divider whose period still fits a 16-bit
+//! auto-reload register, so the tick is as fine as the timer allows. On the
+//! Black Pill (timer clock 100 MHz): 50 Hz divides by 31 (a 0.31 µs tick,
+//! period 64 516 ticks), 200 Hz by 8 (0.08 µs, 62 500), 333 Hz by 5 (0.05 µs,
+//! 60 060): better than 1 µs over the whole 50–333 Hz range. The duty cycle
+//! of a target is then [`duty`] with `max_duty` the period in ticks.
+//!
 //! ## Channels of different types
 //!
 //! Many HALs give each timer channel its own type. An array needs one type:
@@ -37,6 +47,41 @@ pub fn duty(target_q: u16, frame_hz: u32, max_duty: u16) -> u16 {
         .saturating_mul(u64::from(max_duty));
     let d = num.saturating_add(2_000_000) / 4_000_000;
     u16::try_from(d).unwrap_or(u16::MAX).min(max_duty)
+}
+
+/// A timer's prescaler and period for a frame rate (see the module doc).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TimerSetup {
+    /// The clock divider (the prescaler register holds `divider − 1`).
+    pub divider: u32,
+    /// Ticks per period (the auto-reload register holds `period − 1`);
+    /// the channels' `max_duty`.
+    pub period: u16,
+}
+
+impl TimerSetup {
+    /// The finest tick for `frame_hz` (50–333 Hz) on a timer clocked at
+    /// `clock_hz` with a 16-bit auto-reload register: `divider = ⌈clock /
+    /// (f · 65 535)⌉`, `period = round(clock / (divider · f))`.
+    pub fn new(clock_hz: u32, frame_hz: u32) -> Result<Self, ConfigError> {
+        let f = u64::from(check_frame_rate(frame_hz)?);
+        let clock = u64::from(clock_hz);
+        let divider = clock.div_ceil(f * u64::from(u16::MAX)).max(1);
+        let period = (clock + divider * f / 2) / (divider * f);
+        match (u32::try_from(divider), u16::try_from(period)) {
+            (Ok(divider), Ok(period)) if period > 0 => Ok(Self { divider, period }),
+            _ => Err(ConfigError::FrameRate(frame_hz)),
+        }
+    }
+
+    /// One tick, ns (rounded to nearest).
+    #[must_use]
+    pub fn tick_ns(&self, clock_hz: u32) -> u32 {
+        let ns = (u64::from(self.divider) * 1_000_000_000 + u64::from(clock_hz) / 2)
+            .checked_div(u64::from(clock_hz))
+            .unwrap_or(u64::MAX);
+        u32::try_from(ns).unwrap_or(u32::MAX)
+    }
 }
 
 /// Servos on `N` on-chip PWM channels: `targets[i]` drives `channels[i]`.
@@ -108,6 +153,49 @@ mod tests {
         assert_eq!(duty(6000, 50, 0), 0);
         // The worst case neither overflows nor leaves the range.
         assert_eq!(duty(u16::MAX, 333, u16::MAX), u16::MAX);
+    }
+
+    #[test]
+    fn black_pill_timer_setups_and_compare_values_worked_by_hand() {
+        const CLOCK: u32 = 100_000_000;
+        // 50 Hz: 100e6 / (50 · 65 535) = 30.5 -> 31; 100e6 / 31 / 50 =
+        // 64 516.1 -> 64 516 ticks of 310 ns.
+        let s50 = TimerSetup::new(CLOCK, 50).unwrap();
+        assert_eq!(
+            s50,
+            TimerSetup {
+                divider: 31,
+                period: 64_516
+            }
+        );
+        assert_eq!(s50.tick_ns(CLOCK), 310);
+        // 1500 µs: 6000 · 50 · 64 516 / 4e6 = 4838.7 -> 4839 ticks (1500.09 µs).
+        assert_eq!(duty(6000, 50, s50.period), 4839);
+        // 1000 and 2000 µs: 3225.8 -> 3226, 6451.6 -> 6452.
+        assert_eq!(duty(4000, 50, s50.period), 3226);
+        assert_eq!(duty(8000, 50, s50.period), 6452);
+        // 200 Hz: ⌈7.63⌉ = 8, 62 500 ticks of 80 ns; 1500 µs = 18 750.
+        let s200 = TimerSetup::new(CLOCK, 200).unwrap();
+        assert_eq!(
+            (s200.divider, s200.period, s200.tick_ns(CLOCK)),
+            (8, 62_500, 80)
+        );
+        assert_eq!(duty(6000, 200, s200.period), 18_750);
+        // 333 Hz: ⌈4.58⌉ = 5, 60 060.06 -> 60 060 ticks of 50 ns; 1500 µs =
+        // 6000 · 333 · 60 060 / 4e6 = 29 999.97 -> 30 000.
+        let s333 = TimerSetup::new(CLOCK, 333).unwrap();
+        assert_eq!(
+            (s333.divider, s333.period, s333.tick_ns(CLOCK)),
+            (5, 60_060, 50)
+        );
+        assert_eq!(duty(6000, 333, s333.period), 30_000);
+        // Every rate of the range has a tick of 1 µs or better.
+        for f in 50..=333 {
+            let s = TimerSetup::new(CLOCK, f).unwrap();
+            assert!(s.tick_ns(CLOCK) <= 1000, "{f} Hz");
+            assert!(s.period >= 32_768, "{f} Hz: {s:?}");
+        }
+        assert_eq!(TimerSetup::new(CLOCK, 49), Err(ConfigError::FrameRate(49)));
     }
 
     #[test]

@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{Invalid, Place, Problem, RigError};
 use crate::body::{self, Dof, Joint};
+use crate::math;
 use crate::pose::NO_PARENT;
 use crate::servo::{Calibration, StepLimits};
 use crate::wire::{self, List};
@@ -40,6 +41,9 @@ const FAILSAFE_MS: (u32, u32) = (1, 60_000);
 /// Highest pulse width a channel may be calibrated to, µs (the Maestro's
 /// 14-bit quarter-µs target ends at 4095.75 µs).
 const PULSE_MAX_US: f32 = 4000.0;
+/// Highest position of a serial bus servo, in its own units (12 bits: the
+/// Dynamixel X and Feetech STS series turn once in 4096 units).
+const POSITION_MAX: f32 = 4095.0;
 /// Largest trim, µs.
 const TRIM_MAX_US: f32 = 1000.0;
 /// A quaternion or axis counts as unit length when `|‖q‖² − 1| ≤` this.
@@ -125,6 +129,11 @@ impl SegmentDesc<'_> {
 }
 
 /// One servo channel: which joint DOF it drives and how.
+///
+/// The "pulse" fields are in the back-end's target unit: µs for the pulse
+/// back-ends (PWM, PCA9685, Maestro), position units for the serial bus
+/// servos (Dynamixel, Feetech), whose rig-file keys (`center`, `limits`,
+/// `units_per_degree`) the host turns into these.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ServoDesc {
     /// Output channel number (unique; below the back-end's channel count).
@@ -151,6 +160,10 @@ pub struct ServoDesc {
     pub max_speed: f32,
     /// Largest joint acceleration, rad/s² (> 0).
     pub max_accel: f32,
+    /// The servo's id on a serial bus ([`Output::Dynamixel`]: 0 ..= 252,
+    /// [`Output::Feetech`]: 0 ..= 253; unique); ignored by the other
+    /// back-ends.
+    pub id: u8,
 }
 
 impl ServoDesc {
@@ -184,14 +197,15 @@ impl ServoDesc {
 pub enum Output {
     /// On-chip timer PWM, one pin per channel (variant 0).
     Pwm {
-        /// Pulse repetition rate, Hz (1 ..= 1000).
+        /// Pulse repetition rate, Hz (50 ..= 333).
         freq_hz: u16,
     },
     /// NXP PCA9685 16-channel PWM over I²C (variant 1).
     Pca9685 {
-        /// 7-bit I²C address (≤ 0x7F; 0x40 by default on the boards).
+        /// 7-bit I²C address (0x08 ..= 0x7F but not 0x70, the ALLCALL
+        /// address; 0x40 with no address pins strapped).
         i2c_addr: u8,
-        /// Pulse repetition rate, Hz (24 ..= 1526, the chip's range).
+        /// Pulse repetition rate, Hz (50 ..= 400).
         freq_hz: u16,
     },
     /// Pololu Maestro over UART, compact protocol (variant 2).
@@ -199,6 +213,43 @@ pub enum Output {
         /// UART baud rate (300 ..= 250 000).
         baud: u32,
     },
+    /// ROBOTIS Dynamixel, Protocol 2.0, on a half-duplex UART: Sync Write of
+    /// Goal Position (variant 3). Targets are positions (0 ..= 4095).
+    Dynamixel {
+        /// UART baud rate (9600 ..= 4 500 000).
+        baud: u32,
+    },
+    /// Feetech SCS/STS serial bus servos on a half-duplex UART: Sync Write
+    /// of Goal Position (variant 4). Targets are positions.
+    Feetech {
+        /// UART baud rate (38 400 ..= 1 000 000).
+        baud: u32,
+        /// The byte order of the servo's 2-byte registers.
+        series: FeetechSeries,
+    },
+}
+
+/// A Feetech servo family: the byte order of its 2-byte registers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum FeetechSeries {
+    /// STS/SMS (magnetic encoder, 4096 per turn): little-endian (variant 0).
+    #[default]
+    Sts,
+    /// SCS (potentiometer, 1024 per 300°): big-endian (variant 1).
+    Scs,
+}
+
+/// What the servo outputs do once the servos have eased to their rest
+/// targets after a `Disarm` or a fail-safe time-out.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Idle {
+    /// Keep driving the rest targets: the figure holds its rest pose
+    /// (variant 0).
+    #[default]
+    Hold,
+    /// Stop driving: no pulses (hobby servos go limp), bus servos' torque
+    /// off (variant 1).
+    Off,
 }
 
 impl Default for Output {
@@ -215,7 +266,46 @@ impl Output {
             // One board's worth; cascaded PCA9685s are not modelled.
             Output::Pca9685 { .. } => 16,
             // The Mini Maestro 24 has 24; the rig's capacity too.
-            Output::Pwm { .. } | Output::Maestro { .. } => MAX_SERVOS as u8,
+            _ => MAX_SERVOS as u8,
+        }
+    }
+
+    /// Whether the targets are positions of serial bus servos (else pulse
+    /// widths, µs).
+    #[must_use]
+    pub const fn is_bus(&self) -> bool {
+        matches!(self, Output::Dynamixel { .. } | Output::Feetech { .. })
+    }
+
+    /// The highest servo id on the bus (`None`: not a bus).
+    #[must_use]
+    pub const fn max_id(&self) -> Option<u8> {
+        match self {
+            Output::Dynamixel { .. } => Some(252),
+            Output::Feetech { .. } => Some(253),
+            _ => None,
+        }
+    }
+
+    /// The pulse period, µs, of the back-ends that repeat pulses at a
+    /// rate of their own (PWM, PCA9685).
+    #[must_use]
+    pub const fn period_us(&self) -> Option<u32> {
+        match self {
+            Output::Pwm { freq_hz } | Output::Pca9685 { freq_hz, .. } if *freq_hz > 0 => {
+                Some(1_000_000 / *freq_hz as u32)
+            }
+            _ => None,
+        }
+    }
+
+    /// The range of a target, in the back-end's unit (µs, or positions).
+    #[must_use]
+    pub const fn target_range(&self) -> (f32, f32) {
+        if self.is_bus() {
+            (1.0, POSITION_MAX)
+        } else {
+            (1.0, PULSE_MAX_US)
         }
     }
 }
@@ -391,6 +481,8 @@ pub struct RigDesc<'a, const N: usize = MAX_SEGMENTS> {
     pub root_rotation: [f32; 4],
     /// The servo back-end.
     pub output: Output,
+    /// What the outputs do at rest after a disarm or fail-safe.
+    pub idle: Idle,
     /// The skeleton, root first, parents before children.
     pub segments: List<SegmentDesc<'a>, N>,
     /// The servo channels.
@@ -468,6 +560,7 @@ impl<'a> RigDesc<'a> {
             root_position: [0.0; 3],
             root_rotation: [1.0, 0.0, 0.0, 0.0],
             output,
+            idle: Idle::Hold,
             segments: List::new(),
             servos: List::new(),
             params: List::new(),
@@ -513,12 +606,18 @@ impl<const N: usize> RigDesc<'_, N> {
         unit(&self.root_rotation, r, "root_rotation")?;
         let o = Place::Output;
         match self.output {
-            Output::Pwm { freq_hz } => within(freq_hz, 1, 1000, o, "freq_hz"),
+            Output::Pwm { freq_hz } => within(freq_hz, 50, 333, o, "freq_hz"),
             Output::Pca9685 { i2c_addr, freq_hz } => {
-                within(i2c_addr, 0, 0x7F, o, "i2c_addr")?;
-                within(freq_hz, 24, 1526, o, "freq_hz")
+                // 0x00-0x07 are reserved, 0x70 is every PCA9685's ALLCALL.
+                within(i2c_addr, 0x08, 0x7F, o, "i2c_addr")?;
+                if i2c_addr == 0x70 {
+                    return Err(bad(o, "i2c_addr", Problem::OutOfRange));
+                }
+                within(freq_hz, 50, 400, o, "freq_hz")
             }
             Output::Maestro { baud } => within(baud, 300, 250_000, o, "baud"),
+            Output::Dynamixel { baud } => within(baud, 9600, 4_500_000, o, "baud"),
+            Output::Feetech { baud, .. } => within(baud, 38_400, 1_000_000, o, "baud"),
         }
     }
 
@@ -603,16 +702,36 @@ impl<const N: usize> RigDesc<'_, N> {
             if s.angle_min >= s.angle_max {
                 return Err(bad(p, "angle", Problem::Unordered));
             }
-            finite_within(s.pulse_min_us, 1.0, PULSE_MAX_US, p, "pulse_us")?;
-            finite_within(s.pulse_max_us, 1.0, PULSE_MAX_US, p, "pulse_us")?;
-            if s.pulse_min_us == s.pulse_max_us {
-                return Err(bad(p, "pulse_us", Problem::Unordered));
-            }
+            self.validate_targets(i, s, p)?;
             finite_within(s.trim_us, -TRIM_MAX_US, TRIM_MAX_US, p, "trim_us")?;
             let cal = s.calibration();
             finite_within(s.rest_us, cal.pulse_low(), cal.pulse_high(), p, "rest_us")?;
             finite_within(s.max_speed, f32::MIN_POSITIVE, 1e4, p, "max_speed")?;
             finite_within(s.max_accel, f32::MIN_POSITIVE, 1e7, p, "max_accel")?;
+        }
+        Ok(())
+    }
+
+    /// The pulse (or position) range of a servo, and its bus id.
+    fn validate_targets(&self, i: u8, s: &ServoDesc, p: Place) -> Result<(), RigError> {
+        let (lo, hi) = self.output.target_range();
+        let hi = match self.output.period_us() {
+            // A pulse must end before the next one starts.
+            Some(period) => math::min(hi, period as f32 - 1.0),
+            None => hi,
+        };
+        finite_within(s.pulse_min_us, lo, hi, p, "pulse_us")?;
+        finite_within(s.pulse_max_us, lo, hi, p, "pulse_us")?;
+        if s.pulse_min_us == s.pulse_max_us {
+            return Err(bad(p, "pulse_us", Problem::Unordered));
+        }
+        let Some(max_id) = self.output.max_id() else {
+            return Ok(());
+        };
+        within(s.id, 0, max_id, p, "id")?;
+        let earlier = self.servos.as_slice().get(..usize::from(i));
+        if earlier.is_some_and(|e| e.iter().any(|o| o.id == s.id)) {
+            return Err(bad(p, "id", Problem::Duplicate));
         }
         Ok(())
     }

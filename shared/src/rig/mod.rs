@@ -15,12 +15,12 @@
 //! - [`Rig::servos`] say which joint DOF drives which channel, with its
 //!   [`crate::servo::Calibration`] and slew limits.
 //!
-//! # Blob layout (format version 1)
+//! # Blob layout (format version 2)
 //!
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `"MRIG"` (`4D 52 49 47`) |
-//! | 4 | 2 | format version, `u16` LE ([`VERSION`] = 1) |
+//! | 4 | 2 | format version, `u16` LE ([`VERSION`] = 2) |
 //! | 6 | 4 | description length `L`, `u32` LE (≤ [`MAX_DESC_LEN`]) |
 //! | 10 | `L` | [`RigDesc`], postcard 1.x (exactly `L` bytes) |
 //! | 10 + `L` | 4 | CRC-32/ISO-HDLC ([`crate::crc`]) of bytes `0 .. 10 + L`, `u32` LE |
@@ -37,10 +37,15 @@
 //! index then its fields, and a list as varint length then the items. The
 //! description is, in order: `name` (string), `frame_period_us`,
 //! `failsafe_timeout_ms`, `root_position` (3 × f32), `root_rotation`
-//! (`[w, x, y, z]`), `output` ([`Output`]), `segments` ([`SegmentDesc`]:
-//! name, parent `u8`, origin, touch, DOF list of ([`AxisName`], min, max)),
-//! `servos` ([`ServoDesc`]), `params` ([`ParamMap`]) and `goals`
-//! ([`GoalMap`]); the types' docs give each variant's index.
+//! (`[w, x, y, z]`), `output` ([`Output`]), `idle` ([`Idle`]), `segments`
+//! ([`SegmentDesc`]: name, parent `u8`, origin, touch, DOF list of
+//! ([`AxisName`], min, max)), `servos` ([`ServoDesc`], its bus `id` last),
+//! `params` ([`ParamMap`]) and `goals` ([`GoalMap`]); the types' docs give
+//! each variant's index.
+//!
+//! Version 2 added the serial bus servo outputs (variants 3 and 4 of
+//! [`Output`]), `idle` and the servos' `id`. A version 1 blob is refused
+//! ([`RigError::Version`]): write it again from its rig file.
 //!
 //! # Rig hash
 //!
@@ -71,9 +76,9 @@ mod desc;
 pub mod sensor;
 
 pub use desc::{
-    AxisName, Cylinder, DofDesc, GoalMap, GoalSource, MAX_GOALS, MAX_PARAMS, MAX_SEGMENTS,
-    MAX_SENSORS, MAX_SERVOS, Measure, NAME_LEN, Output, ParamMap, RIG_NAME_LEN, RefFrame, RigDesc,
-    SegmentDesc, SensorGoal, ServoDesc,
+    AxisName, Cylinder, DofDesc, FeetechSeries, GoalMap, GoalSource, Idle, MAX_GOALS, MAX_PARAMS,
+    MAX_SEGMENTS, MAX_SENSORS, MAX_SERVOS, Measure, NAME_LEN, Output, ParamMap, RIG_NAME_LEN,
+    RefFrame, RigDesc, SegmentDesc, SensorGoal, ServoDesc,
 };
 pub use sensor::MapReport;
 
@@ -86,7 +91,7 @@ use glam::{Quat, Vec3};
 /// The blob magic.
 pub const MAGIC: [u8; 4] = *b"MRIG";
 /// The blob format version this core reads and writes.
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 /// Bytes before the description: magic, version, length.
 pub const PREFIX_LEN: usize = 10;
 /// Bytes of the CRC after the description.
@@ -280,7 +285,7 @@ impl<'a> RigDesc<'a> {
 /// The head of a description, up to the length of its segment list: the
 /// fields of [`RigDesc`] before `segments`, in order (postcard writes a list
 /// length as the same varint as a `u32`).
-type DescHead<'a> = (&'a str, u32, u32, [f32; 3], [f32; 4], Output, u32);
+type DescHead<'a> = (&'a str, u32, u32, [f32; 3], [f32; 4], Output, Idle, u32);
 
 impl<'a, const N: usize> RigDesc<'a, N> {
     /// [`RigDesc::from_blob`] into a segment list of capacity `N`: a
@@ -370,6 +375,7 @@ pub struct Rig<'a, const N: usize = MAX_SEGMENTS> {
     frame_period_us: u32,
     failsafe_timeout_ms: u32,
     output: Output,
+    idle: Idle,
     root_position: Vec3,
     root_rotation: Quat,
     count: usize,
@@ -479,6 +485,7 @@ impl<'a, const N: usize> Rig<'a, N> {
             frame_period_us: desc.frame_period_us,
             failsafe_timeout_ms: desc.failsafe_timeout_ms,
             output: desc.output,
+            idle: desc.idle,
             root_position: Vec3::from_array(desc.root_position),
             root_rotation: unit_quat(quat_wxyz(desc.root_rotation)),
             count: desc.segments.len(),
@@ -558,6 +565,12 @@ impl<'a, const N: usize> Rig<'a, N> {
     #[must_use]
     pub fn output(&self) -> Output {
         self.output
+    }
+
+    /// What the outputs do at rest after a disarm or fail-safe.
+    #[must_use]
+    pub fn idle(&self) -> Idle {
+        self.idle
     }
 
     /// The skeleton hash (see the module doc); equals the `rig_hash` of the
@@ -676,6 +689,7 @@ mod tests {
                 rest_us: 1500.0,
                 max_speed: 5.0,
                 max_accel: 50.0,
+                id: 0,
             })
             .unwrap();
         d

@@ -61,6 +61,17 @@ impl<T: Copy + Default, const N: usize> List<T, N> {
 }
 
 impl<T, const N: usize> List<T, N> {
+    /// The slot the next item would take (its old contents), if the list
+    /// is not full: fill it in place, then [`List::commit`] it.
+    pub(crate) fn next_slot(&mut self) -> Option<&mut T> {
+        self.items.get_mut(self.len)
+    }
+
+    /// Keeps the slot [`List::next_slot`] gave as the last item.
+    pub(crate) fn commit(&mut self) {
+        self.len = self.len.saturating_add(1).min(N);
+    }
+
     /// The items, in order.
     #[must_use]
     pub fn as_slice(&self) -> &[T] {

@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{ErrorCounters, List};
+use super::{CompactFrame, ErrorCounters, List};
 
 /// Maximum sensors in one [`TrackerFrame`].
 pub const MAX_SENSORS: usize = 16;
@@ -20,7 +20,8 @@ pub const MAX_GOALS: usize = 8;
 /// decode, map, synth, solve, servo, total.
 pub const STAGES: usize = 6;
 
-/// Every message, host to board (tags 0-3) and board to host (tags 4-6).
+/// Every message, host to board (tags 0-3 and 7) and board to host (tags
+/// 4-6).
 ///
 /// Variants differ a lot in size (a full `TrackerFrame` is ~470 bytes); with
 /// no heap they are stored inline on purpose.
@@ -42,6 +43,9 @@ pub enum Message {
     Telemetry(Telemetry),
     /// Tag 6, board → host: a command's result.
     Ack(Ack),
+    /// Tag 7 (version 2), host → board: one tracker sample, quantized
+    /// (see [`super::compact`]).
+    CompactFrame(CompactFrame),
 }
 
 /// Which way a message travels.
@@ -65,6 +69,7 @@ impl Message {
             Self::Status(_) => 4,
             Self::Telemetry(_) => 5,
             Self::Ack(_) => 6,
+            Self::CompactFrame(_) => 7,
         }
     }
 
@@ -72,9 +77,11 @@ impl Message {
     #[must_use]
     pub const fn direction(&self) -> Direction {
         match self {
-            Self::Hello(_) | Self::TrackerFrame(_) | Self::Params(_) | Self::Command(_) => {
-                Direction::HostToBoard
-            }
+            Self::Hello(_)
+            | Self::TrackerFrame(_)
+            | Self::Params(_)
+            | Self::Command(_)
+            | Self::CompactFrame(_) => Direction::HostToBoard,
             Self::Status(_) | Self::Telemetry(_) | Self::Ack(_) => Direction::BoardToHost,
         }
     }
@@ -198,14 +205,71 @@ pub struct Status {
     pub reason: StatusReason,
     /// Rejections so far.
     pub errors: ErrorCounters,
-    /// Frames accepted so far.
+    /// Messages accepted so far, of every kind (`Hello`s that matched,
+    /// tracker frames, `Params`, commands).
     pub frames_ok: u32,
+    /// Appended in version 2: the sequence number of the `RequestStatus`
+    /// this answers, `None` when it answers a `Hello`.
+    pub request_seq: Option<u32>,
+    /// Appended in version 2: the board's state.
+    pub state: State,
+    /// Appended in version 2: fail-safe trips since boot.
+    pub trips: u32,
 }
 
-/// Per-frame outputs and timings from the board.
+/// The board's state (appended to `Status` and `Telemetry` in version 2).
+/// Variant order is the wire contract.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum State {
+    /// Tag 0: cannot arm (no rig, no usable table, a back-end the board
+    /// lacks); `Status.reason` says why.
+    #[default]
+    Unready,
+    /// Tag 1: ready, outputs disabled; servos ease to rest.
+    Disarmed,
+    /// Tag 2: performing every accepted tracker frame.
+    Armed,
+    /// Tag 3: armed, but no valid tracker frame for the rig's fail-safe
+    /// time-out: servos ease to rest until the next frame.
+    FailSafe,
+}
+
+/// A fail-safe trip that ended (appended to `Telemetry` in version 2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Trip {
+    /// The sequence number of the message that ended it: the first tracker
+    /// frame performed after it (or the `Disarm` that ended it).
+    pub seq: u32,
+    /// Fail-safe ticks it lasted: frame periods of the board clock with no
+    /// valid frame after the time-out. Each dropped the solver's correction
+    /// and eased every servo one step to rest (a no-op once at rest).
+    pub ticks: u32,
+}
+
+/// Frame times since the last `Arm` (appended to `Telemetry` in version 2),
+/// in the board's counter units: CPU cycles on hardware; on the emulated
+/// board, ticks of its 25 MHz clock (QEMU's virtual clock: instructions ×
+/// 3.2 under `-icount shift=7`, the host's wall clock otherwise).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FrameTiming {
+    /// Performed frames timed.
+    pub frames: u32,
+    /// Their mean (rounded down).
+    pub mean: u32,
+    /// The longest.
+    pub worst: u32,
+    /// Frames longer than `budget`.
+    pub overruns: u32,
+    /// The rig's frame period in counter units (0: the board has no
+    /// counter, and nothing is an overrun).
+    pub budget: u32,
+}
+
+/// Outputs and timings from the board, after every 10th performed tracker
+/// frame and after the frame that ends a fail-safe trip.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Telemetry {
-    /// Board sequence number (its own counter).
+    /// The sequence number of the tracker frame whose outputs it reports.
     pub seq: u32,
     /// Servo targets in quarter-microseconds (Maestro units).
     pub servo_targets: List<u16, MAX_SERVOS>,
@@ -216,6 +280,15 @@ pub struct Telemetry {
     pub stage_counts: [u32; STAGES],
     /// Rejections so far.
     pub errors: ErrorCounters,
+    /// Appended in version 2: the board's state.
+    pub state: State,
+    /// Appended in version 2: fail-safe trips since boot.
+    pub trips: u32,
+    /// Appended in version 2: the last trip that ended (zeros before the
+    /// first).
+    pub last_trip: Trip,
+    /// Appended in version 2: frame times since the last `Arm`.
+    pub timing: FrameTiming,
 }
 
 /// A command's result.

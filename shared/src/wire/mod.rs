@@ -1,6 +1,10 @@
 //! The serial wire protocol between the host and the board.
 //!
-//! # Specification (protocol version 1)
+//! # Specification (protocol version 2)
+//!
+//! This is the whole contract: a host can be written from it alone. The
+//! board's behaviour (states, replies, fail-safe) is in
+//! [`crate::perform`].
 //!
 //! ## Frames
 //!
@@ -16,21 +20,45 @@
 //!   polynomial `0xEDB88320`, init and xorout `0xFFFFFFFF`) of the payload
 //!   bytes only, appended as 4 bytes **little-endian**.
 //! - **COBS** (Cheshire & Baker; [`cobs`]) of payload + CRC, so that the frame
-//!   contains no `0x00`, followed by one `0x00` delimiter.
+//!   contains no `0x00`, followed by one `0x00` delimiter. When payload + CRC
+//!   ends with a full block (254 non-zero bytes after its last zero), the
+//!   encoder writes **no** empty block after it (no trailing `01` before the
+//!   delimiter); a receiver accepts the frame with or without that `01`.
 //! - A receiver treats every `0x00` as the end of a frame. A sender may send
 //!   extra `0x00` bytes at any time (e.g. one before the first frame) to
 //!   resynchronise; empty frames are ignored. Bytes received before the first
 //!   delimiter form a frame like any other and will normally fail the CRC.
 //! - Limits: payload ≤ [`MAX_PAYLOAD`] = 476 bytes, decoded frame (payload +
 //!   CRC) ≤ [`FRAME_CAPACITY`] = 480 bytes, encoded frame including the
-//!   delimiter ≤ [`MAX_FRAME`] = 483 bytes. A receiver counts a longer frame
-//!   as `oversize` and discards it.
-//! - A frame is rejected, and counted by kind in [`ErrorCounters`], when its
-//!   COBS is malformed (`cobs`), it is shorter than 4 bytes or its CRC differs
-//!   (`crc`), postcard cannot decode the payload or bytes remain after the
-//!   message (`decode`), or it is too long (`oversize`).
+//!   delimiter ≤ [`MAX_FRAME`] = 483 bytes.
 //!
-//! ## postcard encoding of the field types
+//! ## Rejections and their counters
+//!
+//! A frame or message is rejected, and counted by kind in
+//! [`ErrorCounters`] (each a saturating `u32`), at the first check it fails:
+//!
+//! 1. `oversize`: the **decoded** frame (payload + CRC) would exceed
+//!    [`FRAME_CAPACITY`] (480 bytes), however many bytes it took encoded (a
+//!    483-byte encoded frame of 481 decoded bytes is oversize; one of 480 is
+//!    not). Counted once; the rest of it, up to the next `0x00`, is dropped.
+//! 2. `cobs`: the frame ended (`0x00`) inside a COBS block.
+//! 3. `crc`: the decoded frame is shorter than 4 bytes, or its CRC differs.
+//! 4. `decode`: postcard cannot decode the payload (unknown tag or variant,
+//!    bad varint or bool, truncated field, list over capacity), bytes remain
+//!    after the message, or a board-to-host message reached the board.
+//! 5. `version`: a `Hello` with a version the board does not speak, and
+//!    every other message after it until an accepted `Hello`.
+//! 6. `stale`: a sequence number already accepted or up to
+//!    [`STALE_WINDOW`] behind (see below).
+//! 7. `range`: validation failed (see Validation).
+//!
+//! A frame **cut short** is counted by where the cut fell: inside a COBS
+//! block → `cobs`; on a block boundary → `crc` (the bytes before the cut are
+//! a well-formed packet whose CRC fails). A cut frame with no delimiter after
+//! it runs into the next frame: both are lost as **one** rejection, and
+//! their sequence numbers show up in `lost` at the next accepted message.
+//!
+//! //! ## postcard encoding of the field types
 //!
 //! | type | bytes |
 //! |---|---|
@@ -54,9 +82,10 @@
 //! | 1 | [`TrackerFrame`] | host → board | `seq: u32, time_us: u32, sensors: List<Sensor, 16>` |
 //! | 2 | [`Params`] | host → board | `seq: u32, values: List<f32, 6>` |
 //! | 3 | [`Command`] | host → board | `seq: u32, kind: CommandKind` |
-//! | 4 | [`Status`] | board → host | `protocol_version: u16, armed: bool, table_ok: bool, reason: StatusReason, errors: ErrorCounters, frames_ok: u32` |
-//! | 5 | [`Telemetry`] | board → host | `seq: u32, servo_targets: List<u16, 24>, goal_residuals: List<f32, 8>, stage_counts: [u32; 6], errors: ErrorCounters` |
+//! | 4 | [`Status`] | board → host | `protocol_version: u16, armed: bool, table_ok: bool, reason: StatusReason, errors: ErrorCounters, frames_ok: u32`; v2 appends `request_seq: Option<u32>, state: State, trips: u32` |
+//! | 5 | [`Telemetry`] | board → host | `seq: u32, servo_targets: List<u16, 24>, goal_residuals: List<f32, 8>, stage_counts: [u32; 6], errors: ErrorCounters`; v2 appends `state: State, trips: u32, last_trip: Trip, timing: FrameTiming` |
 //! | 6 | [`Ack`] | board → host | `seq: u32, ok: bool` |
+//! | 7 | [`CompactFrame`] (v2) | host → board | `seq16: [u8; 2], time24: [u8; 3], sensors: List<[u8; 11], 16>`: a tracker frame quantized, specified in [`compact`] |
 //!
 //! - [`Sensor`]: `id: u8, position: [f32; 3]` (metres), `rotation: [f32; 4]`
 //!   (`[w, x, y, z]`) — 29 bytes.
@@ -69,22 +98,55 @@
 //!   more segments than the firmware holds).
 //! - [`ErrorCounters`]: eight `u32` varints: `cobs, crc, decode, oversize,
 //!   version, lost, stale, range`.
-//! - `stage_counts`: decode, map, synth, solve, servo, total (instruction
-//!   counts on the emulator, cycles on hardware).
+//! - `Option<u32>`: `00` for `None`, `01` then the varint for `Some`.
+//! - [`State`]: 0 `Unready` (cannot arm: see `reason`), 1 `Disarmed`,
+//!   2 `Armed`, 3 `FailSafe` (armed, tracker silent past the time-out).
+//! - [`Trip`]: `seq: u32, ticks: u32`; [`FrameTiming`]: `frames, mean,
+//!   worst, overruns, budget`, five `u32`.
+//! - `stage_counts`: decode, map, synth, solve, servo, total, in the
+//!   board's counter units (see [`FrameTiming`]).
 //! - `servo_targets` are in quarter-microseconds (Maestro units).
 //!
 //! Largest payloads: `TrackerFrame` with 16 sensors and 5-byte varints
-//! 1 + 5 + 5 + 1 + 16 × 29 = 476 bytes; `Telemetry` 182; `Status` 52.
+//! 1 + 5 + 5 + 1 + 16 × 29 = 476 bytes; `Telemetry` 223; `Status` 64;
+//! `CompactFrame` 7 + 16 × 11 = 183.
+//!
+//! ### What the fields mean
+//!
+//! - `Status.frames_ok`: every message the board accepted since boot, of
+//!   every kind (`Hello`s it speaks, tracker frames, `Params`, commands),
+//!   including the `RequestStatus` a `Status` answers.
+//! - `Status.table_ok`: the region's rig and table can perform (the reason
+//!   would be `Ok` but for a protocol mismatch).
+//! - `Status.reason` is `ProtocolMismatch` only while the last `Hello` was
+//!   refused; an accepted `Hello` clears it.
+//! - `Telemetry.seq`: the sequence number of the tracker frame whose
+//!   outputs it reports. Telemetry goes out after every 10th **performed**
+//!   frame (armed; frames taken while disarmed do not count) and after the
+//!   frame that ends a fail-safe trip, not after every frame.
+//! - Replies: a `Hello` gets a `Status` (`request_seq: None`); a
+//!   `RequestStatus` gets a `Status` whose `request_seq` is its `seq`, and
+//!   **no** `Ack`; every other command gets an `Ack` echoing its `seq`.
+//!   Replies come in the order of the messages they answer.
 //!
 //! ## Sequence numbers
 //!
 //! The host keeps **one** `u32` counter for `TrackerFrame`, `Params` and
 //! `Command`, incremented by one per message sent (wrapping), starting
 //! anywhere (normally 0) after a `Hello`. The board checks it with
-//! [`SeqTracker`]: a gap of `d` counts `d − 1` as `lost`; a duplicate or an
-//! older number (up to [`STALE_WINDOW`] behind) is rejected as `stale`; an
-//! accepted `Hello` restarts tracking. `Telemetry.seq` is the board's own
-//! counter; `Ack.seq` echoes the command's.
+//! [`SeqTracker`], against the last number it accepted:
+//!
+//! - ahead by `d` (`1 ≤ d < 2³¹`): accepted; `d − 1` are counted as `lost`;
+//! - equal, or behind by at most [`STALE_WINDOW`] = 256: rejected as `stale`;
+//! - behind by more than 256: taken as the sender restarting its counter:
+//!   accepted, nothing counted as lost, tracking continues from it;
+//! - the first number after boot or an accepted `Hello` is always accepted.
+//!
+//! A message rejected **before** its sequence number is read (`oversize`,
+//! `cobs`, `crc`, `decode`, `version`) does not advance the tracker, so its
+//! number shows up in `lost` at the next accepted message. One rejected by
+//! **validation** (`range`) does advance it: it is counted once, as
+//! `range`, never also as `lost`. A `stale` one does neither.
 //!
 //! ## Validation (board side)
 //!
@@ -98,26 +160,37 @@
 //!
 //! ## Versioning
 //!
-//! [`PROTOCOL_VERSION`] is 1. The host opens a session with `Hello`; the board
-//! answers with a `Status` carrying its own version. On a mismatch the board
-//! counts a `version` error, reports `reason = ProtocolMismatch`, and rejects
-//! every other message (counted as `version`) until a matching `Hello`. Before
-//! any `Hello` the board accepts messages. Any change to an existing
-//! message's layout, or to a tag, bumps the version; new messages and new
-//! enum variants are appended at the end (a new variant also bumps the
-//! version, since an old decoder rejects it). Decoding is strict: trailing
-//! bytes after the message are a decode error.
+//! [`PROTOCOL_VERSION`] is 2. The host opens a session with `Hello`; the board
+//! answers with a `Status` carrying its own version. A board accepts a host
+//! version from [`MIN_PROTOCOL_VERSION`] (1) to its own; on any other it
+//! counts a `version` error, disarms, reports `reason = ProtocolMismatch`,
+//! and rejects every other message (counted as `version`) until a `Hello` it
+//! accepts, which clears the mismatch. Before any `Hello` the board accepts
+//! messages. Any change to an existing message's layout, or to a tag, bumps
+//! the version; new messages and new enum variants are appended at the end
+//! (a new variant also bumps the version, since an old decoder rejects it).
+//! Decoding is strict: trailing bytes after the message are a decode error.
+//!
+//! Version 2 only **appended**: fields to the board's `Status` and
+//! `Telemetry`, and message tag 7 (the compact tracker frame, which hosts
+//! send by default; tag 1 stays valid). Every version-1 host message is
+//! valid version 2, so a
+//! board keeps accepting version-1 hosts. A version-1 host that decodes
+//! strictly rejects the longer replies; one that reads a reply's prefix
+//! (and ignores what follows) gets the version-1 fields unchanged. In every
+//! version `Status.protocol_version` is the payload's second field: bytes
+//! `04` then its varint.
 //!
 //! ## Worked example
 //!
-//! `Hello { protocol_version: 1 }`:
+//! `Hello { protocol_version: 2 }`:
 //!
 //! ```text
-//! payload           00 01                  tag 0, varint 1
-//! crc32(payload)    0x36DE2269  -> LE      69 22 DE 36
-//! payload ++ crc    00 01 69 22 DE 36
-//! COBS              01 | 06 01 69 22 DE 36  (block "" + zero, block of 5)
-//! frame             01 06 01 69 22 DE 36 00
+//! payload           00 02                  tag 0, varint 2
+//! crc32(payload)    0xAFD773D3  -> LE      D3 73 D7 AF
+//! payload ++ crc    00 02 D3 73 D7 AF
+//! COBS              01 | 06 02 D3 73 D7 AF  (block "" + zero, block of 5)
+//! frame             01 06 02 D3 73 D7 AF 00
 //! ```
 //!
 //! `Ack { seq: 300, ok: true }`: payload `06 AC 02 01`, CRC `0x917C76D0`,
@@ -142,12 +215,13 @@
 //! - Sender: [`encode`] a [`Message`] into a buffer of [`MAX_FRAME`] bytes and
 //!   write the returned slice.
 //! - Board receiver: [`Receiver`] (bytes in, validated [`Incoming`] out, all
-//!   counters kept), or the pieces: [`FrameReader`] → [`decode_frame`] →
-//!   [`SeqTracker`] → `validate()`.
+//!   counters kept; tracker frames validated in place), or the pieces:
+//!   [`FrameReader`] → [`decode_frame`] → [`SeqTracker`] → `validate()`.
 //!
 //! Nothing here allocates or panics.
 
 pub mod cobs;
+pub mod compact;
 mod error;
 mod list;
 mod message;
@@ -156,11 +230,13 @@ mod receiver;
 mod seq;
 mod validate;
 
+pub use compact::CompactFrame;
 pub use error::{ErrorCounters, WireError};
 pub use list::List;
 pub use message::{
-    Ack, Command, CommandKind, Direction, Hello, MAX_GOALS, MAX_PARAMS, MAX_SENSORS, MAX_SERVOS,
-    Message, Params, STAGES, Sensor, Status, StatusReason, Telemetry, TrackerFrame,
+    Ack, Command, CommandKind, Direction, FrameTiming, Hello, MAX_GOALS, MAX_PARAMS, MAX_SENSORS,
+    MAX_SERVOS, Message, Params, STAGES, Sensor, State, Status, StatusReason, Telemetry,
+    TrackerFrame, Trip,
 };
 pub use reader::FrameReader;
 pub use receiver::{Incoming, Receiver, Session};
@@ -174,7 +250,10 @@ use crate::crc::{Crc32, crc32};
 use postcard::ser_flavors::Flavor;
 
 /// The protocol version this crate speaks.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
+/// The oldest host version a board accepts: every version-1 host message is
+/// a valid version-2 message (see [Versioning](self#versioning)).
+pub const MIN_PROTOCOL_VERSION: u16 = 1;
 /// Bytes of CRC after the payload.
 pub const CRC_LEN: usize = 4;
 /// Largest postcard payload of any [`Message`] (a full `TrackerFrame`).
@@ -283,6 +362,12 @@ mod tests {
             Err(WireError::Crc)
         );
         assert_eq!(decode_frame(&[0x69, 0x22, 0xDE]), Err(WireError::Crc));
+        // The worked example of the spec (version 2; CRC from zlib).
+        let msg = Message::Hello(Hello {
+            protocol_version: 2,
+        });
+        let frame = encode(&msg, &mut out).unwrap();
+        assert_eq!(frame, &[0x01, 0x06, 0x02, 0xD3, 0x73, 0xD7, 0xAF, 0x00]);
     }
 
     #[test]

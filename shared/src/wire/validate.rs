@@ -39,6 +39,14 @@ pub struct SensorSample {
 }
 
 impl SensorSample {
+    /// Sets every field; the caller has established the invariants (a
+    /// compact sensor is valid by construction).
+    pub(crate) fn set(&mut self, id: u8, position: Vec3, rotation: Quat) {
+        self.id = id;
+        self.position = position;
+        self.rotation = rotation;
+    }
+
     /// Sensor id, `< MAX_SENSORS`.
     #[must_use]
     pub const fn id(&self) -> u8 {
@@ -116,29 +124,80 @@ impl ValidTrackerFrame {
     }
 }
 
+impl ValidTrackerFrame {
+    /// An empty frame, to be filled by [`TrackerFrame::validate_into`] or a
+    /// receiver.
+    #[must_use]
+    pub fn empty() -> Self {
+        Self {
+            seq: 0,
+            time_us: 0,
+            sensors: List::new(),
+        }
+    }
+
+    /// Starts refilling the frame in place (no whole-buffer clear).
+    pub(crate) fn restart(&mut self, seq: u32, time_us: u32) {
+        self.seq = seq;
+        self.time_us = time_us;
+        self.sensors.clear();
+    }
+
+    /// Appends a sensor, checking that its id is new.
+    ///
+    /// # Errors
+    /// [`WireError::Range`] for a repeated id or more than
+    /// [`MAX_SENSORS`] sensors.
+    pub(crate) fn push(&mut self, sample: SensorSample) -> Result<(), WireError> {
+        self.push_with(|slot| {
+            *slot = sample;
+            Ok(())
+        })
+    }
+
+    /// Appends a sensor that `fill` writes in place (no copy of it), then
+    /// checks that its id is new.
+    ///
+    /// # Errors
+    /// `fill`'s error; [`WireError::Range`] for a repeated id or more than
+    /// [`MAX_SENSORS`] sensors.
+    pub(crate) fn push_with(
+        &mut self,
+        fill: impl FnOnce(&mut SensorSample) -> Result<(), WireError>,
+    ) -> Result<(), WireError> {
+        let slot = self.sensors.next_slot().ok_or(WireError::Range)?;
+        fill(slot)?;
+        let id = slot.id;
+        if self.sensors.iter().any(|s| s.id == id) {
+            return Err(WireError::Range);
+        }
+        self.sensors.commit();
+        Ok(())
+    }
+}
+
 impl TrackerFrame {
     /// Checks every sensor and that no id repeats.
     ///
     /// # Errors
     /// [`WireError::Range`] on the first invalid sensor or repeated id.
     pub fn validate(&self) -> Result<ValidTrackerFrame, WireError> {
-        let mut seen: u32 = 0;
-        let mut sensors = List::new();
+        let mut out = ValidTrackerFrame::empty();
+        self.validate_into(&mut out)?;
+        Ok(out)
+    }
+
+    /// [`TrackerFrame::validate`] into `out`, in place (it is half a
+    /// kilobyte). On an error `out` holds a partial frame.
+    ///
+    /// # Errors
+    /// As [`TrackerFrame::validate`].
+    pub fn validate_into(&self, out: &mut ValidTrackerFrame) -> Result<(), WireError> {
+        out.restart(self.seq, self.time_us);
         for s in &self.sensors {
-            let v = s.validate()?;
-            // id < MAX_SENSORS = 16 was checked, so the shift is in range.
-            let bit = 1u32 << (u32::from(v.id) & 31);
-            if seen & bit != 0 {
-                return Err(WireError::Range);
-            }
-            seen |= bit;
-            sensors.push(v).map_err(|_| WireError::Range)?;
+            out.push(s.validate()?)?;
         }
-        Ok(ValidTrackerFrame {
-            seq: self.seq,
-            time_us: self.time_us,
-            sensors,
-        })
+        Ok(())
     }
 }
 

@@ -1,0 +1,489 @@
+//! The board's side of a performance: the protocol state machine around the
+//! per-frame [`Pipeline`].
+//!
+//! [`Performer`] is everything a board does with the tracker link, shared by
+//! the firmware (which only moves bytes between it and its peripherals) and
+//! the host's `marionette sim` (which feeds it a recording). It answers the
+//! handshake and the commands, keeps the fail-safe, times each frame, and
+//! hands every accepted tracker frame to the [`Pipeline`] (map, synthesize,
+//! solve, servo) when there is a rig to drive. Without a valid rig it still
+//! speaks the protocol: it answers `Hello` and `RequestStatus` with the
+//! reason, refuses `Arm`, and never produces servo targets.
+//!
+//! ## States
+//!
+//! ```text
+//!              Arm (reason Ok)          no valid frame for the time-out (tick)
+//!   Disarmed ──────────────────▶ Armed ─────────────────────────────────▶ FailSafe
+//!      ▲  ◀──── Disarm, or a Hello ──┘ ◀── an accepted tracker frame ────────┘
+//!      └────────────── Disarm, or a Hello ◀───────────────────────────────────┘
+//!   Unready: no rig, no usable table, or a back-end the board lacks (Arm refused)
+//! ```
+//!
+//! - **Disarmed**: tracker frames are taken (their sensors and times kept)
+//!   and the servos ease to rest, one step per frame or tick.
+//! - **Armed**: every accepted tracker frame is performed.
+//! - **FailSafe**: armed, but [`Performer::tick`] found no accepted tracker
+//!   frame for the rig's fail-safe time-out (counted from the last frame or
+//!   from `Arm`): each tick drops the solver's correction and eases the
+//!   servos one step to rest. The next accepted tracker frame ends the trip
+//!   and is performed; the trip is reported (see below).
+//! - A `Hello` with another protocol version disarms and reports
+//!   `ProtocolMismatch` until a matching `Hello`, which clears it (the
+//!   reason is the session's, never latched).
+//!
+//! ## Replies
+//!
+//! - `Hello` → `Status` (with `request_seq: None`).
+//! - `RequestStatus` → `Status` with `request_seq: Some(seq)`, and no `Ack`.
+//! - every other command → `Ack { seq, ok }`.
+//! - `Telemetry` after every [`TELEMETRY_EVERY`]th performed frame, and
+//!   after the frame that ends a fail-safe trip; its `seq` is that frame's.
+//!
+//! ## What the board reports about itself
+//!
+//! `Status` and `Telemetry` carry the [`State`] and the number of fail-safe
+//! trips since boot. `Telemetry` also carries the last trip: the sequence
+//! number of the message that ended it and the number of fail-safe ticks it
+//! lasted ([`Performer::tick`] calls that found the link silent; each drops
+//! the solver's correction and eases one step). A native replay that runs
+//! that many ticks just before that message reproduces the board's output
+//! bit for bit. It also carries [`FrameTiming`]: each performed frame's
+//! count from the [`Cycles`] the board passes (the frame's `TOTAL` stage),
+//! as mean, worst and overruns since the last `Arm`.
+
+use crate::frame::{Cycles, Pipeline, Region, stage};
+use crate::pose::{MAX_SEGMENTS, Pose};
+use crate::solve::SolverState;
+use crate::wire::{
+    Ack, CommandKind, ErrorCounters, FrameTiming, Incoming, List, Message, PROTOCOL_VERSION,
+    Receiver, STAGES, State, Status, StatusReason, Telemetry, Trip, ValidCommand,
+};
+
+/// A telemetry message goes out after every this many performed frames.
+pub const TELEMETRY_EVERY: u32 = 10;
+
+/// The frame period and fail-safe time-out of a board without a rig, µs.
+const IDLE_PERIOD_US: u32 = 1000;
+
+/// Why servo targets changed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Cause {
+    /// An accepted tracker frame (its sequence number).
+    Frame(u32),
+    /// Easing to rest: fail-safe time-out or disarmed.
+    Rest,
+}
+
+/// What one call of [`Performer::receive`] or [`Performer::tick`] produced.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Update {
+    /// New servo targets are ready in [`Performer::targets`].
+    pub outputs: Option<Cause>,
+    /// A message to send back to the host.
+    pub reply: Option<Message>,
+}
+
+impl Update {
+    /// Nothing happened.
+    pub const NONE: Self = Self {
+        outputs: None,
+        reply: None,
+    };
+
+    const fn reply(msg: Message) -> Self {
+        Self {
+            outputs: None,
+            reply: Some(msg),
+        }
+    }
+}
+
+/// Frame times since the last `Arm`, in the units of the board's [`Cycles`].
+#[derive(Clone, Copy, Debug, Default)]
+struct Timing {
+    frames: u32,
+    sum: u64,
+    worst: u32,
+    overruns: u32,
+}
+
+impl Timing {
+    fn add(&mut self, cycles: u32, budget: u32) {
+        self.frames = self.frames.saturating_add(1);
+        self.sum = self.sum.saturating_add(u64::from(cycles));
+        self.worst = self.worst.max(cycles);
+        if budget > 0 && cycles > budget {
+            self.overruns = self.overruns.saturating_add(1);
+        }
+    }
+
+    fn report(&self, budget: u32) -> FrameTiming {
+        let mean = self.sum.checked_div(u64::from(self.frames)).unwrap_or(0);
+        FrameTiming {
+            frames: self.frames,
+            mean: u32::try_from(mean).unwrap_or(u32::MAX),
+            worst: self.worst,
+            overruns: self.overruns,
+            budget,
+        }
+    }
+}
+
+/// The live loop of one board (see the module doc), for rigs of at most `N`
+/// segments.
+pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
+    pipeline: Option<Pipeline<'r, 'a, N>>,
+    receiver: Receiver,
+    /// Why the board cannot arm, from its region or [`Performer::refuse`]
+    /// (never `ProtocolMismatch`, which is the session's).
+    reason: StatusReason,
+    armed: bool,
+    period_us: u32,
+    timeout_us: u32,
+    last_frame_us: u32,
+    /// In the fail-safe state: the ticks of the current trip so far.
+    trip_ticks: Option<u32>,
+    trips: u32,
+    last_trip: Trip,
+    stages: [u32; STAGES],
+    timing: Timing,
+    frames_out: u32,
+    disarms: u32,
+}
+
+impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
+    /// The loop for `region` (disarmed; servos assumed at rest), solving with
+    /// `solver`'s storage. Without a valid rig it only speaks the protocol
+    /// and reports the region's reason.
+    #[must_use]
+    pub fn new(region: &'r Region<'a, N>, solver: &'r mut SolverState<N>) -> Self {
+        let pipeline = Pipeline::new(region, solver);
+        let reason = match (region.reason, &pipeline) {
+            (StatusReason::Ok, Some(p)) if !p.has_grid() => StatusReason::Unsupported,
+            (StatusReason::Ok, None) => StatusReason::NoRig,
+            (r, _) => r,
+        };
+        let (period_us, timeout_ms) = pipeline.as_ref().map_or((IDLE_PERIOD_US, 0), |p| {
+            (p.rig().frame_period_us(), p.rig().failsafe_timeout_ms())
+        });
+        Self {
+            pipeline,
+            receiver: Receiver::new(),
+            reason,
+            armed: false,
+            period_us,
+            timeout_us: timeout_ms.saturating_mul(1000),
+            last_frame_us: 0,
+            trip_ticks: None,
+            trips: 0,
+            last_trip: Trip::default(),
+            stages: [0; STAGES],
+            timing: Timing::default(),
+            frames_out: 0,
+            disarms: 0,
+        }
+    }
+
+    /// Marks the loop as unable to drive this rig on this board (for
+    /// example a servo back-end the board lacks): it disarms, refuses every
+    /// `Arm`, and reports `reason` in its [`Status`] (unless the region
+    /// already gave a reason, which is reported first).
+    pub fn refuse(&mut self, reason: StatusReason) {
+        if self.reason == StatusReason::Ok {
+            self.reason = reason;
+        }
+        self.armed = false;
+    }
+
+    /// The per-frame pipeline, if the region holds a rig.
+    #[must_use]
+    pub fn pipeline(&self) -> Option<&Pipeline<'r, 'a, N>> {
+        self.pipeline.as_ref()
+    }
+
+    /// The rig's frame period (1000 µs without a rig): call
+    /// [`Performer::tick`] this often.
+    #[must_use]
+    pub fn frame_period_us(&self) -> u32 {
+        self.period_us
+    }
+
+    /// The servo targets by channel, quarter-µs (empty without a rig).
+    #[must_use]
+    pub fn targets(&self) -> &[u16] {
+        self.pipeline.as_ref().map_or(&[], Pipeline::targets)
+    }
+
+    /// Whether the servo outputs are enabled.
+    #[must_use]
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+
+    /// Why the board cannot arm now ([`StatusReason::Ok`] if it can),
+    /// `ProtocolMismatch` while the session's last `Hello` did not match.
+    #[must_use]
+    pub fn reason(&self) -> StatusReason {
+        match self.receiver.session() {
+            crate::wire::Session::Rejected { .. } => StatusReason::ProtocolMismatch,
+            _ => self.reason,
+        }
+    }
+
+    /// The board's state (see the module doc).
+    #[must_use]
+    pub fn state(&self) -> State {
+        match (self.reason(), self.armed, self.trip_ticks) {
+            (StatusReason::Ok, true, Some(_)) => State::FailSafe,
+            (StatusReason::Ok, true, None) => State::Armed,
+            (StatusReason::Ok, false, _) | (StatusReason::ProtocolMismatch, _, _) => {
+                State::Disarmed
+            }
+            _ => State::Unready,
+        }
+    }
+
+    /// The receive path's error counters.
+    #[must_use]
+    pub fn errors(&self) -> &ErrorCounters {
+        self.receiver.errors()
+    }
+
+    /// Frames whose parameters had to be clamped or projected into the table.
+    #[must_use]
+    pub fn adjusted_frames(&self) -> u32 {
+        self.pipeline.as_ref().map_or(0, Pipeline::adjusted_frames)
+    }
+
+    /// Frames dropped because synthesis or solving failed (targets held).
+    #[must_use]
+    pub fn failed_frames(&self) -> u32 {
+        self.pipeline.as_ref().map_or(0, Pipeline::failed_frames)
+    }
+
+    /// The current world pose of the figure (solved, or rest), if there is
+    /// a rig.
+    #[must_use]
+    pub fn pose(&self) -> Option<&Pose<N>> {
+        self.pipeline.as_ref().map(Pipeline::pose)
+    }
+
+    /// The per-stage counts of the last performed frame (see [`stage`]), in
+    /// the units of the [`Cycles`] passed to [`Performer::receive`].
+    #[must_use]
+    pub fn stages(&self) -> [u32; STAGES] {
+        self.stages
+    }
+
+    /// Fail-safe trips since boot.
+    #[must_use]
+    pub fn trips(&self) -> u32 {
+        self.trips
+    }
+
+    /// The last fail-safe trip that ended (zeros before the first).
+    #[must_use]
+    pub fn last_trip(&self) -> Trip {
+        self.last_trip
+    }
+
+    /// How many `Disarm` commands the loop has obeyed.
+    #[must_use]
+    pub fn disarms(&self) -> u32 {
+        self.disarms
+    }
+
+    /// Whether every servo is at its rest pulse and still (true without a
+    /// rig).
+    #[must_use]
+    pub fn resting(&self) -> bool {
+        self.pipeline.as_ref().is_none_or(Pipeline::resting)
+    }
+
+    /// Whether the outputs have nothing left to do until the next armed
+    /// frame (see [`Pipeline::settled`]; true without a rig).
+    #[must_use]
+    pub fn settled(&self) -> bool {
+        self.pipeline.as_ref().is_none_or(Pipeline::settled)
+    }
+
+    /// The board's status message; `request_seq` is the `RequestStatus`
+    /// it answers (`None` for a `Hello`).
+    #[must_use]
+    pub fn status(&self, request_seq: Option<u32>) -> Status {
+        Status {
+            protocol_version: PROTOCOL_VERSION,
+            armed: self.armed,
+            table_ok: self.reason == StatusReason::Ok,
+            reason: self.reason(),
+            errors: *self.receiver.errors(),
+            frames_ok: self.receiver.frames_ok(),
+            request_seq,
+            state: self.state(),
+            trips: self.trips,
+        }
+    }
+
+    /// Feeds received bytes, advancing `input` past what was consumed, until
+    /// one message has been handled; call again while `input` is not empty.
+    /// `now_us` is the board clock.
+    pub fn receive(&mut self, input: &mut &[u8], now_us: u32, cycles: &mut dyn Cycles) -> Update {
+        let start = cycles.now();
+        let Some(incoming) = self.receiver.push_slice(input) else {
+            return Update::NONE;
+        };
+        let decoded = cycles.now();
+        match incoming {
+            Incoming::Hello { accepted, .. } => {
+                if !accepted {
+                    self.disarm();
+                }
+                Update::reply(Message::Status(self.status(None)))
+            }
+            Incoming::Params(p) => {
+                if let Some(pipeline) = &mut self.pipeline {
+                    pipeline.set_dials(p.values());
+                }
+                Update::NONE
+            }
+            Incoming::Command(c) => Update::reply(self.command(c, now_us)),
+            Incoming::Tracker => {
+                self.stages[stage::DECODE] = decoded.wrapping_sub(start);
+                self.frame(now_us, cycles, start)
+            }
+        }
+    }
+
+    /// Called by the board every frame period with its clock: runs the
+    /// fail-safe (see the module doc) and eases to rest while disarmed.
+    /// Returns outputs only when they moved.
+    pub fn tick(&mut self, now_us: u32) -> Update {
+        let lost = self.armed && now_us.wrapping_sub(self.last_frame_us) >= self.timeout_us;
+        if lost {
+            let ticks = self.trip_ticks.map_or(1, |t| t.saturating_add(1));
+            if self.trip_ticks.is_none() {
+                self.trips = self.trips.saturating_add(1);
+            }
+            self.trip_ticks = Some(ticks);
+        }
+        let Some(pipeline) = &mut self.pipeline else {
+            return Update::NONE;
+        };
+        if lost || !self.armed {
+            pipeline.drop_correction();
+            if pipeline.rest_step() {
+                return Update {
+                    outputs: Some(Cause::Rest),
+                    reply: None,
+                };
+            }
+        }
+        Update::NONE
+    }
+
+    fn disarm(&mut self) {
+        self.armed = false;
+        if let Some(pipeline) = &mut self.pipeline {
+            pipeline.drop_correction();
+        }
+    }
+
+    /// Ends a fail-safe trip (if one is on) at the message `seq`; true if
+    /// one ended.
+    fn end_trip(&mut self, seq: u32) -> bool {
+        match self.trip_ticks.take() {
+            Some(ticks) => {
+                self.last_trip = Trip { seq, ticks };
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn command(&mut self, c: ValidCommand, now_us: u32) -> Message {
+        let ok = match c.kind() {
+            CommandKind::Arm => {
+                let ready = self.reason == StatusReason::Ok && self.pipeline.is_some();
+                if ready && !self.armed {
+                    self.armed = true;
+                    self.last_frame_us = now_us;
+                    self.timing = Timing::default();
+                }
+                ready
+            }
+            CommandKind::Disarm => {
+                self.end_trip(c.seq());
+                self.disarm();
+                self.disarms = self.disarms.wrapping_add(1);
+                true
+            }
+            CommandKind::SelectTable(n) => n == 0 && self.reason == StatusReason::Ok,
+            CommandKind::SelectClip(_) => false,
+            CommandKind::SetGoalWeight { goal, weight } => self
+                .pipeline
+                .as_mut()
+                .is_some_and(|p| p.set_goal_weight(goal, weight)),
+            CommandKind::Boresight { sensor } => {
+                self.pipeline.as_mut().is_some_and(|p| p.boresight(sensor))
+            }
+            CommandKind::RequestStatus => return Message::Status(self.status(Some(c.seq()))),
+        };
+        Message::Ack(Ack { seq: c.seq(), ok })
+    }
+
+    /// One accepted tracker frame.
+    fn frame(&mut self, now_us: u32, cycles: &mut dyn Cycles, start: u32) -> Update {
+        let Some(pipeline) = &mut self.pipeline else {
+            return Update::NONE;
+        };
+        let frame = self.receiver.frame();
+        let seq = frame.seq();
+        let dt = pipeline.take(frame);
+        if !self.armed {
+            let moved = pipeline.rest_step();
+            return Update {
+                outputs: moved.then_some(Cause::Rest),
+                reply: None,
+            };
+        }
+        self.last_frame_us = now_us;
+        let end = pipeline.perform(dt, cycles, &mut self.stages);
+        let total = end.wrapping_sub(start);
+        self.stages[stage::TOTAL] = total;
+        self.timing.add(total, self.budget(cycles));
+        self.frames_out = self.frames_out.wrapping_add(1);
+        let tripped = self.end_trip(seq);
+        // The reply set in place: an update is hundreds of bytes.
+        let mut update = Update {
+            outputs: Some(Cause::Frame(seq)),
+            reply: None,
+        };
+        if tripped || self.frames_out.is_multiple_of(TELEMETRY_EVERY) {
+            update.reply = Some(self.telemetry(seq, cycles));
+        }
+        update
+    }
+
+    /// The frame period in the units of `cycles` (0 if it has no rate).
+    fn budget(&self, cycles: &dyn Cycles) -> u32 {
+        let c = u64::from(self.period_us) * u64::from(cycles.hz()) / 1_000_000;
+        u32::try_from(c).unwrap_or(u32::MAX)
+    }
+
+    fn telemetry(&self, seq: u32, cycles: &dyn Cycles) -> Message {
+        let pipeline = self.pipeline.as_ref();
+        Message::Telemetry(Telemetry {
+            seq,
+            servo_targets: List::from_slice(self.targets()).unwrap_or_default(),
+            goal_residuals: List::from_slice(pipeline.map_or(&[], Pipeline::residuals))
+                .unwrap_or_default(),
+            stage_counts: self.stages,
+            errors: *self.receiver.errors(),
+            state: self.state(),
+            trips: self.trips,
+            last_trip: self.last_trip,
+            timing: self.timing.report(self.budget(cycles)),
+        })
+    }
+}
