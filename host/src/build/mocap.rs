@@ -220,6 +220,12 @@ impl Frame {
         }
     }
 
+    /// A point in this frame.
+    #[must_use]
+    pub fn point(&self, p: DVec3) -> DVec3 {
+        self.rot * (p - self.origin)
+    }
+
     /// A pose in this frame.
     #[must_use]
     pub fn apply(&self, pose: &[Seg]) -> Vec<Seg> {

@@ -173,6 +173,16 @@ impl Space {
             .collect()
     }
 
+    /// Parameters (axis units) of a point in cell units.
+    #[must_use]
+    pub fn params(&self, cells: &[f64]) -> Vec<f64> {
+        self.axes
+            .iter()
+            .zip(cells)
+            .map(|(a, &u)| a.min + u * a.step())
+            .collect()
+    }
+
     /// Per-axis difference `a − b` in cell units (wrapped on cyclic axes).
     fn diff(&self, a: &[f64], b: &[f64], out: &mut [f64]) {
         for (((o, ax), &x), &y) in out.iter_mut().zip(&self.axes).zip(a).zip(b) {
@@ -627,7 +637,7 @@ pub fn score(
     folds: &[Vec<usize>],
     method: Method,
     probe: Option<(usize, DVec3)>,
-    post: &dyn Fn(&mut Value),
+    post: &dyn Fn(&[f64], &mut Value),
 ) -> Score {
     let mut pos = Vec::new();
     let mut rot = Vec::new();
@@ -646,7 +656,7 @@ pub fn score(
         for &t in fold {
             let w = fitted.weights(&space.cells(&records[t].params));
             let mut pred = blend(&values, &w);
-            post(&mut pred);
+            post(&records[t].params, &mut pred);
             let e = compare(&pred, &records[t].value, probe);
             pos.push(e.mean_position);
             rot.push(e.mean_rotation);
@@ -722,7 +732,7 @@ pub fn grid(
     records: &[Record],
     method: Method,
     radius: f64,
-    post: &dyn Fn(&mut Value),
+    post: &dyn Fn(&[f64], &mut Value),
     tick: &dyn Fn(),
 ) -> Resampled {
     let centres: Vec<Vec<f64>> = records.iter().map(|r| space.cells(&r.params)).collect();
@@ -741,7 +751,7 @@ pub fn grid(
                 .collect();
             let v = if hits.is_empty() {
                 let mut v = blend(&values, &fitted.weights(g));
-                post(&mut v);
+                post(&space.params(g), &mut v);
                 v
             } else {
                 exact += 1;
@@ -864,7 +874,14 @@ mod tests {
             value: scalar(0.0),
             group: 0,
         }];
-        let r = grid(&space, &records, Method::Idw { k: 1 }, 0.5, &|_| {}, &|| {});
+        let r = grid(
+            &space,
+            &records,
+            Method::Idw { k: 1 },
+            0.5,
+            &|_, _| {},
+            &|| {},
+        );
         assert_eq!(r.valid, [true, false, false]);
         assert_eq!(r.values.len(), 4);
         // Examples on both corners of the last cell validate it even with a
@@ -879,7 +896,7 @@ mod tests {
             &[on(2.0), on(3.0)],
             Method::Idw { k: 1 },
             0.1,
-            &|_| {},
+            &|_, _| {},
             &|| {},
         );
         assert_eq!(r.valid, [false, false, true]);

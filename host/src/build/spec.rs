@@ -53,6 +53,9 @@
 //!                           # its corners, is this close to an example (default √p / 2;
 //!                           # a cell whose corners are all examples is always valid)
 //! # enforce_lengths = true  # W&H limb-length enforcement of each resampled pose
+//! # place_probe = true      # grid of one point's x, y, z (the hand): solve each
+//!                           # resampled pose so the point sits on its grid point
+//!                           # (see `place`); poses the rig cannot fit stay as resampled
 //! ```
 //!
 //! `frame = "stand"` is for a figure whose root is held by a stand (a
@@ -264,6 +267,8 @@ pub struct ResampleSpec {
     pub valid_radius: Option<f64>,
     /// Limb-length enforcement of resampled poses.
     pub enforce_lengths: bool,
+    /// Solve each resampled pose of a probe-position grid onto its grid point.
+    pub place_probe: bool,
 }
 
 #[derive(Deserialize)]
@@ -345,6 +350,7 @@ struct RawResample {
     method: Option<Spanned<String>>,
     valid_radius: Option<Spanned<f64>>,
     enforce_lengths: Option<bool>,
+    place_probe: Option<bool>,
 }
 
 /// Reads and checks a spec file.
@@ -950,6 +956,7 @@ impl Parser<'_> {
             method,
             valid_radius,
             enforce_lengths: g.and_then(|g| g.enforce_lengths).unwrap_or(true),
+            place_probe: g.and_then(|g| g.place_probe).unwrap_or(true),
         })
     }
 }
