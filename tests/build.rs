@@ -594,3 +594,84 @@ fn reach_grid_beats_the_nearest_example_on_held_out_clips() {
     assert!(joint <= 0.9 * nearest, "{joint} m vs nearest {nearest} m");
     assert!(bytes <= 64 * 1024, "{bytes} B");
 }
+
+/// The bundled slope walks (CMU 74_15 at 60 fps, 74_19 whose header says 120
+/// fps): one looping stride each, cut at frames 120..=204.
+#[test]
+fn slope_walks_loop_in_place_store_their_climb_and_take_a_per_clip_rate() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let path = root.join("data/builds/slope_walk.toml");
+    let (data, built, spec) = load_and_build(&path);
+    assert!(data.warnings.is_empty(), "{:?}", data.warnings);
+    let table = Table::parse(&built.blob).unwrap();
+    // The root's displacement over the stride, from the imported,
+    // retargeted clips before any normalization (the rig's root sits a few
+    // millimetres off the BVH root joint, so not the raw channels).
+    let spec::Input::Mocap(m) = &spec.input else {
+        panic!("a mocap spec")
+    };
+    let mocap = build::mocap::load(&spec, m, &|_| {}).unwrap();
+    for (clip, (name, slope)) in mocap.clips.iter().zip([("74_15", 7.0f32), ("74_19", 13.0)]) {
+        assert_eq!(clip.name, name);
+        let moved = clip.poses[204][0].0 - clip.poses[120][0].0;
+        let s = query::synthesize(&table, &[slope], None).unwrap();
+        // 84 frames at 60 fps, for 74_19 too (`fps = 60` on the clip).
+        assert!((s.duration.unwrap() - 1.4).abs() < 1e-4, "{name}: {s:?}");
+        let [x, y, z] = s.travel.expect("a loop stores its travel");
+        // Heading frame: y is up (the climb), z the direction of travel.
+        assert!(
+            (y as f64 - moved.y).abs() < 1e-3,
+            "{name}: rise {y} vs {}",
+            moved.y
+        );
+        let horizontal = moved.x.hypot(moved.z);
+        assert!(
+            (z as f64 - horizontal).abs() < 1e-3 && x.abs() < 1e-3,
+            "{name}: {x} {z}"
+        );
+        assert!(moved.y > 0.08, "{name}: the stride climbs {}", moved.y);
+        // In place: the stored cycle's root ends where it started (within
+        // the stride's own bob), not 8-16 cm higher, and never jumps.
+        let (frames, _) = query::frames(&table, &[slope]).unwrap();
+        let heights: Vec<f32> = frames.iter().map(|f| f[0].0.y).collect();
+        let jump = heights
+            .windows(2)
+            .chain(std::iter::once(
+                &[heights[heights.len() - 1], heights[0]][..],
+            ))
+            .map(|w| (w[1] - w[0]).abs())
+            .fold(0.0f32, f32::max);
+        assert!(
+            jump < 0.01,
+            "{name}: root height jumps {jump} m between frames"
+        );
+    }
+    // Without the override, 74_19 runs at its header's 120 fps: its cycle
+    // halves and the build warns, naming the spec, line and field.
+    let text = std::fs::read_to_string(&path)
+        .unwrap()
+        .replace("fps = 60\n", "");
+    let dir = root.join("data/builds");
+    let src = build::error::Source {
+        file: "slope_walk.toml".into(),
+        text,
+    };
+    let spec = spec::parse(src, dir).unwrap();
+    let progress = Progress::new(false);
+    let data = build::load(&spec, &progress).unwrap();
+    let warning = data
+        .warnings
+        .iter()
+        .find(|w| w.contains("74_19"))
+        .expect("a warning for 74_19");
+    assert!(
+        warning.starts_with("slope_walk.toml:28:")
+            && warning.contains("clip[1].fps")
+            && warning.contains("120 fps"),
+        "{warning}"
+    );
+    let built = build::build(&spec, &data, None, &progress).unwrap();
+    let table = Table::parse(&built.blob).unwrap();
+    let s = query::synthesize(&table, &[13.0], None).unwrap();
+    assert!((s.duration.unwrap() - 0.7).abs() < 1e-4, "{s:?}");
+}

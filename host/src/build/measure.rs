@@ -343,7 +343,7 @@ pub fn holdout(
                 .zip(&r.value.scalars)
                 .map(|(p, t)| ((p - t) / t).abs())
                 .sum();
-            durations.push(rel / r.value.scalars.len() as f64);
+            durations.push(rel / pred.scalars.len().max(1) as f64);
         }
         if let (Some(body), Some((_, seg))) = (&body, solver) {
             let (p, q) = r.value.poses[seg];

@@ -190,6 +190,9 @@ pub struct Dataset {
     pub originals: Vec<mocap::Originals>,
     /// Seconds spent importing.
     pub load_seconds: f64,
+    /// Import warnings (a clip whose frame rate looks wrong), each naming
+    /// the spec file, line and field.
+    pub warnings: Vec<String>,
 }
 
 /// Progress reporting (an indicatif bar on a terminal, nothing otherwise).
@@ -283,6 +286,7 @@ fn from_examples(set: &examples::ExampleSet) -> Dataset {
         param_frame: mocap::Frame::WORLD,
         originals: Vec::new(),
         load_seconds: 0.0,
+        warnings: Vec::new(),
     }
 }
 
@@ -373,6 +377,7 @@ fn from_mocap(
         axes,
         records,
         groups: mocap.clips.iter().map(|c| c.name.clone()).collect(),
+        warnings: mocap.warnings,
         layout,
         rig_hash: mocap.rig.hash,
         rig: Some(mocap.rig),
@@ -582,10 +587,11 @@ fn table_spec(data: &Dataset, grid: &resample::Resampled) -> Result<TableSpec, B
         s.iter().map(|(p, q)| (p.as_vec3(), q.as_quat())).collect()
     };
     let mut axes: Vec<AxisSpec> = data.axes.iter().map(AxisDef::to_blob).collect();
-    let (kind, samples, durations) = match data.layout {
+    let (kind, samples, durations, travel) = match data.layout {
         Layout::Grid => (
             Kind::Grid,
             grid.values.iter().map(|v| f32_pose(&v.poses)).collect(),
+            Vec::new(),
             Vec::new(),
         ),
         Layout::Clips {
@@ -616,14 +622,27 @@ fn table_spec(data: &Dataset, grid: &resample::Resampled) -> Result<TableSpec, B
                     samples.push(f32_pose(&v.poses[f * n..(f + 1) * n]));
                 }
             }
+            // Scalars: the phase durations, then a loop's root travel x, y, z.
             let durations = grid
                 .values
                 .iter()
-                .flat_map(|v| v.scalars.iter().map(|&d| (d as f32).max(1e-3)))
+                .flat_map(|v| v.scalars.iter().take(phases))
+                .map(|&d| (d as f32).max(1e-3))
                 .collect();
+            let travel = if looping {
+                grid.values
+                    .iter()
+                    .map(|v| {
+                        let t = |k: usize| v.scalars.get(phases + k).map_or(0.0, |&x| x as f32);
+                        [t(0), t(1), t(2)]
+                    })
+                    .collect()
+            } else {
+                Vec::new()
+            };
             let phases =
                 u8::try_from(phases).map_err(|_| BuildError::Data("too many phases".to_owned()))?;
-            (Kind::Clips { phases }, samples, durations)
+            (Kind::Clips { phases }, samples, durations, travel)
         }
     };
     Ok(TableSpec {
@@ -634,5 +653,6 @@ fn table_spec(data: &Dataset, grid: &resample::Resampled) -> Result<TableSpec, B
         samples,
         valid: grid.valid.clone(),
         durations,
+        travel,
     })
 }

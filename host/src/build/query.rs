@@ -54,6 +54,9 @@ pub struct Synth {
     pub duration: Option<f32>,
     /// Per-phase durations (clip tables).
     pub durations: Vec<f32>,
+    /// A looping clip's root displacement per cycle (x, y, z metres, the
+    /// clip frame): the figure advances by it each cycle.
+    pub travel: Option<[f32; 3]>,
     /// What the query did to the parameters.
     pub adjust: Adjust,
     /// The parameters actually used.
@@ -102,6 +105,7 @@ pub fn synthesize(
                 pose: pose_vec(&out),
                 duration: None,
                 durations: Vec::new(),
+                travel: None,
                 adjust: q.adjust(),
                 params: q.params().to_vec(),
             })
@@ -114,6 +118,7 @@ pub fn synthesize(
                 pose: pose_vec(&out),
                 duration: Some(motion.duration()),
                 durations: motion.durations().to_vec(),
+                travel: clips.looping().then(|| motion.travel().to_array()),
                 adjust: motion.adjust(),
                 params: motion.params().to_vec(),
             })

@@ -21,6 +21,9 @@
 //! # frames = [[0, 200]]    # grid: inclusive frame ranges (default: all)
 //! # cut = [10, 130]        # clips: phase boundaries, first to last frame
 //! # params = [1.7]         # explicit parameters (else measured, see [[axis]])
+//! # fps = 60               # this clip's frame rate (overrides [mocap] fps and the
+//!                          # file's header; a rate that makes the root's speed
+//!                          # implausible is warned about, see `mocap`)
 //!
 //! [rig]                     # retarget: see `retarget`
 //! # file = "../../rigs/cmu31.toml"  # a rig file (relative to the spec, or a name in rigs/)
@@ -171,6 +174,8 @@ pub struct ClipSpec {
     pub cut: Vec<usize>,
     /// Explicit parameters.
     pub params: Option<Vec<f64>>,
+    /// This clip's frame rate (overrides `[mocap] fps` and the header).
+    pub fps: Option<f64>,
     /// Line of the clip's `file` key (for errors found while loading).
     pub line: usize,
 }
@@ -306,6 +311,7 @@ struct RawClip {
     every: Option<Spanned<usize>>,
     cut: Option<Spanned<Vec<usize>>>,
     params: Option<Spanned<Vec<f64>>>,
+    fps: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -622,9 +628,16 @@ impl Parser<'_> {
             || r.file.get_ref().clone(),
             |s| s.to_string_lossy().into_owned(),
         );
+        let fps = match &r.fps {
+            Some(f) if !(f.get_ref().is_finite() && *f.get_ref() > 0.0) => {
+                return self.err(f.span(), &field("fps"), "must be a finite number > 0");
+            }
+            f => f.as_ref().map(|f| *f.get_ref()),
+        };
         Ok(ClipSpec {
             file,
             name,
+            fps,
             frames: r.frames.as_ref().map(|f| f.get_ref().clone()),
             every: self.step(r.every.as_ref(), &field("every"))?,
             cut,

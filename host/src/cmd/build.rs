@@ -45,6 +45,9 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     let spec = read_spec(&args.spec)?;
     let progress = Progress::new(!args.quiet);
     let data = build::load(&spec, &progress)?;
+    for w in &data.warnings {
+        eprintln!("warning: {w}");
+    }
     if let Some(path) = &args.examples_out {
         write_examples(&data, path)?;
     }
@@ -78,6 +81,9 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         }
     }
     if args.json {
+        if !data.warnings.is_empty() {
+            report.insert("warnings".into(), json!(data.warnings));
+        }
         println!("{}", serde_json::to_string_pretty(&report)?);
     }
     Ok(())

@@ -127,6 +127,49 @@ pub struct Header<'a> {
     pub valid: Span,
     /// Clip durations (`f32` LE, seconds), phase fastest; empty for grids.
     pub durations: Span,
+    /// Looping clip tables: each parameter sample's root displacement over
+    /// one cycle (`3 × f32` LE, metres, the clip frame's x, y, z); empty
+    /// otherwise. Version 2 and later (a version 1 header ends before it).
+    pub travel: Span,
+}
+
+/// The version 1 header: [`Header`] without `travel` (read, never written).
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+pub(super) struct HeaderV1<'a> {
+    total_len: u32,
+    rig_hash: u64,
+    kind: Kind,
+    axis_count: u8,
+    axes: [Axis; MAX_AXES],
+    segment_count: u16,
+    segment_names: &'a [u8],
+    position_scale: f32,
+    position_bound: f32,
+    rotation_bound: f32,
+    samples: Span,
+    valid: Span,
+    durations: Span,
+}
+
+impl<'a> From<HeaderV1<'a>> for Header<'a> {
+    fn from(h: HeaderV1<'a>) -> Self {
+        Header {
+            total_len: h.total_len,
+            rig_hash: h.rig_hash,
+            kind: h.kind,
+            axis_count: h.axis_count,
+            axes: h.axes,
+            segment_count: h.segment_count,
+            segment_names: h.segment_names,
+            position_scale: h.position_scale,
+            position_bound: h.position_bound,
+            rotation_bound: h.rotation_bound,
+            samples: h.samples,
+            valid: h.valid,
+            durations: h.durations,
+            travel: Span::default(),
+        }
+    }
 }
 
 /// A fixed-size name without its zero padding (`None` if not UTF-8).
