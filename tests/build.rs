@@ -675,3 +675,69 @@ fn slope_walks_loop_in_place_store_their_climb_and_take_a_per_clip_rate() {
     let s = query::synthesize(&table, &[13.0], None).unwrap();
     assert!((s.duration.unwrap() - 0.7).abs() < 1e-4, "{s:?}");
 }
+
+/// The bundled iClone walks (CMU subject 07 on a 100-joint `CC_Base_*` rig):
+/// the spec strips the prefix, renames the root and drops fingers, toes,
+/// face, twist and share bones; every naming error points into the spec.
+#[test]
+fn iclone_walks_build_onto_a_renamed_pruned_rig() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let path = root.join("data/builds/walk_ccrig.toml");
+    let (data, built, _) = load_and_build(&path);
+    let names = &built.table.segment_names;
+    assert_eq!(names.len(), 22, "{names:?}");
+    assert_eq!(names[0], "hips");
+    for want in [
+        "L_Thigh",
+        "R_Foot",
+        "Spine02",
+        "Head",
+        "L_Hand",
+        "R_Forearm",
+    ] {
+        assert!(names.iter().any(|n| n == want), "{want} in {names:?}");
+    }
+    assert!(
+        names
+            .iter()
+            .all(|n| !n.starts_with("CC_Base_") && !n.contains("Twist"))
+    );
+    // SOURCE.txt: ~1.07 and ~2.18 m/s (the file is in centimetres).
+    let speeds: Vec<f64> = data.records.iter().map(|r| r.params[0]).collect();
+    assert!(
+        (speeds[0] - 1.07).abs() < 0.1 && (speeds[1] - 2.18).abs() < 0.15,
+        "{speeds:?}"
+    );
+    // Every naming error points into the spec: file, line, field.
+    let text = std::fs::read_to_string(&path).unwrap();
+    let load_err = |t: String| {
+        let src = build::error::Source {
+            file: "walk_ccrig.toml".into(),
+            text: t,
+        };
+        let spec = spec::parse(src, root.join("data/builds")).unwrap();
+        match build::load(&spec, &Progress::new(false)) {
+            Ok(_) => panic!("the spec loaded"),
+            Err(e) => e.to_string(),
+        }
+    };
+    // Without `drop`: 100 segments, more than a table holds.
+    let no_drop: Vec<&str> = text.lines().filter(|l| !l.starts_with("drop")).collect();
+    let e = load_err(no_drop.join("\n"));
+    assert!(
+        e.starts_with("walk_ccrig.toml:16: rig.drop:") && e.contains("100 segments"),
+        "{e}"
+    );
+    // A 26-byte segment name.
+    let e = load_err(text.replace("Hip = \"hips\"", "Hip = \"a_26_byte_segment_name_xx\""));
+    assert!(
+        e.starts_with("walk_ccrig.toml:18: rig.rename:") && e.contains("longer than 24 bytes"),
+        "{e}"
+    );
+    // Two joints renamed alike.
+    let e = load_err(text.replace("Hip = \"hips\"", "Hip = \"Head\""));
+    assert!(
+        e.starts_with("walk_ccrig.toml:18: rig.rename:") && e.contains("\"Head\""),
+        "{e}"
+    );
+}
