@@ -360,6 +360,12 @@ fn two_phase_motion_table_matches_the_closed_form() {
             let d = &s.durations;
             assert!((f64::from(d[0]) - (0.30 + 0.10 * t)).abs() < 1e-5, "{d:?}");
             assert!((f64::from(d[1]) - (0.20 + 0.20 * t)).abs() < 1e-5, "{d:?}");
+            assert_eq!(s.adjust, Adjust::None, "t {t} phase {phase}");
+        }
+        // A phase past a one-shot motion's end is clamped, and says so.
+        for phase in [-0.5f32, 2.5] {
+            let s = query::synthesize(&table, &[t as f32], Some(phase)).unwrap();
+            assert_eq!(s.adjust, Adjust::Clamped, "phase {phase}");
         }
     }
 }

@@ -57,7 +57,8 @@ pub struct Synth {
     /// A looping clip's root displacement per cycle (x, y, z metres, the
     /// clip frame): the figure advances by it each cycle.
     pub travel: Option<[f32; 3]>,
-    /// What the query did to the parameters.
+    /// What the query did to the parameters (or, for a one-shot clip
+    /// table, to a phase outside `[0, phases]`: clamped).
     pub adjust: Adjust,
     /// The parameters actually used.
     pub params: Vec<f32>,
@@ -113,13 +114,18 @@ pub fn synthesize(
         Kind::Clips { phases } => {
             let clips = Clips::new(table.grid()?, table.param_grid()?, usize::from(phases))?;
             let motion = clips.motion(table, params)?;
-            clips.pose(&motion, table, phase.unwrap_or(0.0), &mut out)?;
+            let phase_adjust = clips.pose(&motion, table, phase.unwrap_or(0.0), &mut out)?;
+            // A phase outside a one-shot motion is clamped: say so.
+            let adjust = match (motion.adjust(), phase_adjust) {
+                (Adjust::None, Adjust::Clamped) => Adjust::Clamped,
+                (a, _) => a,
+            };
             Ok(Synth {
                 pose: pose_vec(&out),
                 duration: Some(motion.duration()),
                 durations: motion.durations().to_vec(),
                 travel: clips.looping().then(|| motion.travel().to_array()),
-                adjust: motion.adjust(),
+                adjust,
                 params: motion.params().to_vec(),
             })
         }

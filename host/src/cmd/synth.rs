@@ -7,7 +7,10 @@
 //! `duration` is the interpolated motion's total duration in seconds for a
 //! clip table, null for a grid. A looping clip table adds `"travel":[x,y,z]`,
 //! the root's displacement per cycle in metres (the clip frame: y up, z the
-//! direction of travel). When the parameters were clamped to the axes
+//! direction of travel). `clamped` is true when the parameters were clamped
+//! to the axes, or the phase to a one-shot motion's `[0, phases]`;
+//! `projected` when they fell in an invalid cell and were projected onto the
+//! data. When the parameters were clamped to the axes
 //! or projected out of an invalid cell, a note goes to stderr.
 
 use std::fmt::Write as _;
@@ -83,7 +86,12 @@ pub fn to_json(table: &Table<'_>, s: &Synth) -> serde_json::Value {
             })
         })
         .collect();
-    let mut out = json!({ "segments": segments, "duration": s.duration.map(short) });
+    let mut out = json!({
+        "segments": segments,
+        "duration": s.duration.map(short),
+        "clamped": s.adjust == Adjust::Clamped,
+        "projected": s.adjust == Adjust::Projected,
+    });
     if let (Some(t), Some(map)) = (s.travel, out.as_object_mut()) {
         map.insert("travel".into(), json!(t.map(short)));
     }
