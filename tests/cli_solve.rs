@@ -395,3 +395,37 @@ fn restarts_meet_reachable_goals_that_one_local_solve_misses() {
         "one local solve misses some ({met_local} of {n})"
     );
 }
+
+#[test]
+fn synth_json_output_is_a_start_pose() {
+    use marionette_host::build::{self, Progress, query, spec};
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/builds/reach_humanoid16.toml");
+    let spec = spec::read(&path).unwrap();
+    let progress = Progress::new(false);
+    let data = build::load(&spec, &progress).unwrap();
+    let built = build::build(&spec, &data, None, &progress).unwrap();
+    let table = marionette_core::table::Table::parse(&built.blob).unwrap();
+    let s = query::synthesize(&table, &[0.05, 0.3, 0.2], None).unwrap();
+    let start = marionette_host::cmd::synth::to_json(&table, &s);
+    assert!(start.get("duration").is_some(), "{start}");
+    // With an inactive goal the solve keeps its start: the synthesized pose
+    // (projected onto the joints), not the rest pose.
+    let goals = r#"[{"segment": "head", "target": [0, 1, 0], "weight": 0}]"#;
+    let doc = format!(r#"{{"start": {start}, "goals": {goals}}}"#);
+    let from_synth = solve(&doc);
+    let from_rest = solve(&format!(r#"{{"goals": {goals}}}"#));
+    let moved = from_synth
+        .segments
+        .iter()
+        .zip(&from_rest.segments)
+        .map(|(a, b)| {
+            let d: f32 = a.rotation.iter().zip(b.rotation).map(|(x, y)| x * y).sum();
+            2.0 * d.abs().min(1.0).acos()
+        })
+        .fold(0.0f32, f32::max);
+    assert!(moved > 0.2, "the start was not used: {moved} rad");
+    // A segment entry is still checked field by field.
+    let bad = doc.replacen("\"position\"", "\"positon\"", 1);
+    let e = fails(&bad);
+    assert!(e.contains("start.segments[0].positon"), "{e}");
+}

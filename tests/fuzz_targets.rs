@@ -163,6 +163,7 @@ pub fn humanoid16_table() -> Vec<u8> {
         samples,
         valid: vec![true],
         durations: vec![],
+        travel: vec![],
     };
     blob::write(&spec).expect("the test table is valid")
 }
@@ -202,6 +203,7 @@ pub fn clip_table() -> Vec<u8> {
         samples: (0..12).map(pose).collect(),
         valid: vec![true, false, true, true],
         durations: vec![1.0, 1.1, 1.2, 1.3],
+        travel: vec![],
     };
     blob::write(&spec).expect("the clip table is valid")
 }

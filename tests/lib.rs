@@ -99,6 +99,25 @@ pub mod synth_ref {
         slerp(b1, b2, s)
     }
 
+    /// Wiley & Hahn's nested interpolation tree over the `2^p` corners of
+    /// one cell (axis 0 fastest in `corners`), written out level by level:
+    /// lerp positions and slerp rotations (exact, shortest arc) along axis
+    /// 0 with `t[0]`, then the results along axis 1, and so on.
+    pub fn nested_tree(corners: &[(V, Q)], t: &[f64]) -> (V, Q) {
+        let mut level: Vec<(V, Q)> = corners.to_vec();
+        for &u in t {
+            level = level
+                .chunks(2)
+                .map(|pair| match pair {
+                    [(pa, qa), (pb, qb)] => (lerp3(*pa, *pb, u), slerp(*qa, *qb, u)),
+                    [one] => *one,
+                    _ => unreachable!("chunks of 2"),
+                })
+                .collect();
+        }
+        level[0]
+    }
+
     /// Deterministic xorshift64* generator for test inputs (shared by the
     /// tests that need random inputs).
     pub struct Rng(u64);

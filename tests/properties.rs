@@ -21,7 +21,7 @@ use glam::{Quat, Vec3};
 use marionette_core::body::{Angles, Body};
 use marionette_core::frame::{Performer, Region};
 use marionette_core::goal::{Attach, Frame, Goal, GoalSet, PlaneSide, Target};
-use marionette_core::grid::{Axis, AxisKind, Grid, GridError, Interp, SliceSamples};
+use marionette_core::grid::{Axis, Grid, GridError, Interp, SliceSamples, Wrap};
 use marionette_core::pose::{MAX_SEGMENTS, Pose};
 use marionette_core::rig::Rig;
 use marionette_core::servo::{Calibration, Slew, StepLimits, quarter_us};
@@ -89,12 +89,12 @@ fn grid_axis() -> impl Strategy<Value = Axis> {
             min,
             step,
             count,
-            kind: if cyclic {
-                AxisKind::Cyclic {
+            wrap: if cyclic {
+                Wrap::Cyclic {
                     period: step * count as f32,
                 }
             } else {
-                AxisKind::Bounded
+                Wrap::Bounded
             },
             interp: if cubic {
                 Interp::CatmullRom

@@ -4,9 +4,7 @@
 //! closed forms.
 
 use glam::{Quat, Vec3};
-use marionette_core::grid::{
-    Adjust, Axis, AxisKind, Grid, GridError, Interp, Samples, SliceSamples,
-};
+use marionette_core::grid::{Adjust, Axis, Grid, GridError, Interp, Samples, SliceSamples, Wrap};
 use marionette_core::math;
 use marionette_core::pose::{self, Hierarchy, LocalPose, NO_PARENT, Pose};
 use marionette_tests::synth_ref::{self as r, Q, Rng, V};
@@ -43,12 +41,12 @@ impl RefAxis {
             min: self.min as f32,
             step: self.step as f32,
             count: self.count as u32,
-            kind: if self.cyclic {
-                AxisKind::Cyclic {
+            wrap: if self.cyclic {
+                Wrap::Cyclic {
                     period: (self.step * self.count as f64) as f32,
                 }
             } else {
-                AxisKind::Bounded
+                Wrap::Bounded
             },
             interp: if self.cubic {
                 Interp::CatmullRom
@@ -927,7 +925,7 @@ fn clip_set(looping: bool, phases: usize, frames: u32, seed: u64) -> ClipSet {
             min: 0.0,
             step: 1.0 / frames as f32,
             count: frames,
-            kind: AxisKind::Cyclic { period: 1.0 },
+            wrap: Wrap::Cyclic { period: 1.0 },
             interp: Interp::Linear,
         }
     } else {
@@ -1256,7 +1254,7 @@ fn hdm05_held_out_synthesis_error() {
                 min: 0.0,
                 step: stride as f32,
                 count: count as u32,
-                kind: AxisKind::Bounded,
+                wrap: Wrap::Bounded,
                 interp,
             };
             let grid = Grid::new(&[axis], None).unwrap();

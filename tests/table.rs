@@ -263,6 +263,7 @@ fn random_grid(rng: &mut Rng, segments: usize, range: f64) -> TableSpec {
         // 3 × 2 × 5 cells.
         valid: (0..30).map(|c| c % 7 != 3).collect(),
         durations: vec![],
+        travel: vec![],
     }
 }
 
@@ -449,6 +450,7 @@ fn clip_table_round_trip() {
         samples: samples.clone(),
         valid: vec![true, false],
         durations: durations.clone(),
+        travel: (0..6).map(|i| [0.1 * i as f32, 0.02, 1.0]).collect(),
     };
     let bytes = blob::write(&spec).unwrap();
     let t = Table::parse(&bytes).unwrap();
@@ -468,8 +470,9 @@ fn clip_table_round_trip() {
             assert_eq!(t.duration(p, ph), Some(durations[p * 2 + ph]));
         }
         assert_eq!(t.duration(p, 2), None);
+        assert_eq!(t.travel(p), Some(Vec3::new(0.1 * p as f32, 0.02, 1.0)));
     }
-    assert_eq!(t.duration(6, 0), None);
+    assert_eq!((t.duration(6, 0), t.travel(6)), (None, None));
     for (i, poses) in samples.iter().enumerate() {
         for (s, &(p, q)) in poses.iter().enumerate() {
             let (dp, dq) = t.sample(i, s).unwrap();
@@ -582,6 +585,7 @@ fn tiny_spec() -> TableSpec {
         ],
         valid: vec![true],
         durations: vec![],
+        travel: vec![],
     }
 }
 
@@ -592,13 +596,13 @@ fn tiny_spec() -> TableSpec {
 fn tiny_blob_exact_bytes() {
     let bytes = blob::write(&tiny_spec()).unwrap();
     // Header: total 2 + rig 2 + kind 1 + axis_count 1 + 6 axes × 35 + segment_count 1
-    // + names 1 + 24 + floats 12 + spans 3 × 3 = 263 bytes; data start align4(10 + 263) = 276;
-    // samples 276..300, valid 300..301, durations at 304 (empty), CRC 304..308.
+    // + names 1 + 24 + floats 12 + spans 4 × 3 = 266 bytes; data start align4(10 + 266) = 276;
+    // samples 276..300, valid 300..301, durations and travel at 304 (empty), CRC 304..308.
     assert_eq!(bytes.len(), 308);
     let mut want: Vec<u8> = Vec::new();
     want.extend_from_slice(b"MRNT");
-    want.extend_from_slice(&[0x01, 0x00]); // version 1
-    want.extend_from_slice(&[0x07, 0x01, 0x00, 0x00]); // header length 263 = 0x107
+    want.extend_from_slice(&[0x02, 0x00]); // version 2
+    want.extend_from_slice(&[0x0A, 0x01, 0x00, 0x00]); // header length 266 = 0x10A
     want.extend_from_slice(&[0xB4, 0x02]); // total_len 308 = 0b10_0110100
     want.extend_from_slice(&[0xB4, 0x24]); // rig_hash 0x1234 = 4660 = 36·128 + 52
     want.push(0x00); // kind Grid
@@ -618,8 +622,8 @@ fn tiny_blob_exact_bytes() {
     want.extend_from_slice(&[0x94, 0x02, 24]); // samples: offset 276, len 24
     want.extend_from_slice(&[0xAC, 0x02, 1]); // valid: offset 300, len 1
     want.extend_from_slice(&[0xB0, 0x02, 0]); // durations: offset 304, len 0
-    assert_eq!(want.len(), 273);
-    want.extend_from_slice(&[0; 3]); // padding to 276
+    want.extend_from_slice(&[0xB0, 0x02, 0]); // travel: offset 304, len 0
+    assert_eq!(want.len(), 276); // no padding: 276 is 4-aligned
     // Sample 0: (0, 0, 0), identity: w dropped, x = y = z = code 16383.
     want.extend_from_slice(&[0, 0, 0, 0, 0, 0, 0xFC, 0xFF, 0xFE, 0x7F, 0xFF, 0x3F]);
     // Sample 1: codes 32767 (1 m is the largest coordinate), −8192 (−0.25 m ≈ −8191.75 LSB), 0;
@@ -645,6 +649,85 @@ fn tiny_blob_exact_bytes() {
     assert!(1.0 / scale <= 32767.0);
     assert_eq!(f(1), scale * 0.51);
     assert_eq!(f(2), 1.75e-4);
+}
+
+/// A version 1 blob (no travel span) is still read in place: the tiny blob
+/// rewritten by hand as version 1 (header 3 bytes shorter, same data start).
+#[test]
+fn version_1_blob_is_still_read() {
+    let v2 = blob::write(&tiny_spec()).unwrap();
+    let mut v1: Vec<u8> = Vec::new();
+    v1.extend_from_slice(b"MRNT");
+    v1.extend_from_slice(&[0x01, 0x00]);
+    v1.extend_from_slice(&263u32.to_le_bytes());
+    v1.extend_from_slice(&v2[10..10 + 263]); // every field up to `durations`
+    v1.extend_from_slice(&[0; 3]); // padding to 276
+    v1.extend_from_slice(&v2[276..304]); // samples, mask, padding
+    let crc = crc32(&v1);
+    v1.extend_from_slice(&crc.to_le_bytes());
+    let (a, b) = (Table::parse(&v1).unwrap(), Table::parse(&v2).unwrap());
+    assert_eq!(a.len(), 308);
+    assert_eq!(
+        (a.sample(1, 0), a.cell_valid(0)),
+        (b.sample(1, 0), b.cell_valid(0))
+    );
+    assert_eq!(a.travel(0), None);
+    // Version 3 is not read.
+    let mut v3 = v2.clone();
+    v3[4] = 3;
+    assert_eq!(
+        Table::parse(&v3).unwrap_err(),
+        TableError::BadVersion { found: 3 }
+    );
+}
+
+/// A looping clip table's travel round-trips through the writer and the
+/// in-place reader, and its bytes sit where the header says.
+#[test]
+fn looping_travel_round_trips() {
+    let axes = vec![
+        axis("slope", 0.0, 1.0, 2, Wrap::Bounded, Interp::Linear),
+        axis(
+            "phase",
+            0.0,
+            0.5,
+            2,
+            Wrap::Cyclic { period: 1.0 },
+            Interp::Linear,
+        ),
+    ];
+    let spec = TableSpec {
+        rig_hash: 5,
+        kind: Kind::Clips { phases: 1 },
+        axes,
+        segment_names: vec!["hips".into()],
+        samples: vec![vec![(Vec3::ZERO, Quat::IDENTITY)]; 4],
+        valid: vec![true],
+        durations: vec![1.0, 1.5],
+        travel: vec![[0.0, 0.1, 0.9], [-0.25, 0.2, 1.5]],
+    };
+    let bytes = blob::write(&spec).unwrap();
+    let t = Table::parse(&bytes).unwrap();
+    assert_eq!(t.travel(0), Some(Vec3::new(0.0, 0.1, 0.9)));
+    assert_eq!(t.travel(1), Some(Vec3::new(-0.25, 0.2, 1.5)));
+    assert_eq!(t.travel(2), None);
+    // The last 12 bytes before the CRC are sample 1's travel, f32 LE.
+    let end = bytes.len() - 4;
+    let want: Vec<u8> = [-0.25f32, 0.2, 1.5]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    assert_eq!(&bytes[end - 12..end], &want[..]);
+    // Wrong count or a bounded phase with travel is refused by the writer.
+    let mut short = spec.clone();
+    short.travel.pop();
+    let travel_error = |s: &TableSpec| matches!(blob::write(s), Err(BlobError::Travel { .. }));
+    assert!(travel_error(&short));
+    let mut bounded = spec;
+    bounded.axes[1] = axis("phase", 0.0, 1.0, 2, Wrap::Bounded, Interp::Linear);
+    assert!(travel_error(&bounded));
+    bounded.travel.clear();
+    assert!(blob::write(&bounded).is_ok());
 }
 
 // ---------------------------------------------------------------------------
@@ -717,10 +800,10 @@ fn wrong_magic_and_version() {
     b[0] = b'm';
     assert_eq!(Table::parse(&b).unwrap_err(), TableError::BadMagic);
     let mut b = bytes.clone();
-    b[4] = 2;
+    b[4] = 3;
     assert_eq!(
         Table::parse(&b).unwrap_err(),
-        TableError::BadVersion { found: 2 }
+        TableError::BadVersion { found: 3 }
     );
     let mut b = bytes.clone();
     b[4..6].copy_from_slice(&0xFFFF_u16.to_le_bytes());
@@ -811,7 +894,8 @@ fn bad_header_fields_after_the_crc() {
     );
     check(&base, &|h| h.durations.len = 4, TableError::BadBounds); // runs into the CRC
     // Shape.
-    check(&base, &|h| h.axes[0].count = u16::MAX, TableError::BadSize);
+    // (A count of one varint byte keeps the data start where it was.)
+    check(&base, &|h| h.axes[0].count = 100, TableError::BadSize);
     check(
         &base,
         &|h| h.axes[0].step = f32::NAN,

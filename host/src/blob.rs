@@ -55,6 +55,9 @@ pub struct TableSpec {
     /// Clips only: seconds per phase per parameter sample, phase fastest.
     /// Empty for a grid.
     pub durations: Vec<f32>,
+    /// Looping clips only: each parameter sample's root displacement over
+    /// one cycle (x, y, z metres in the clip frame). Empty otherwise.
+    pub travel: Vec<[f32; 3]>,
 }
 
 /// Why a table could not be written.
@@ -122,6 +125,15 @@ pub enum BlobError {
         /// Flags given.
         found: usize,
     },
+    /// The travel has the wrong length (one per parameter sample of a
+    /// looping clip table, none otherwise), or a value is not finite.
+    #[error("travel: expected {expected} finite x, y, z triples, got {found}")]
+    Travel {
+        /// Triples expected.
+        expected: usize,
+        /// Triples given.
+        found: usize,
+    },
     /// The durations have the wrong length, or one is not finite and positive.
     #[error("durations: expected {expected} finite positive values, got {found} values")]
     Durations {
@@ -147,6 +159,7 @@ pub fn write(spec: &TableSpec) -> Result<Vec<u8>, BlobError> {
     let samples = encode_samples(&spec.samples, scale);
     let valid = mask(&spec.valid, shape.param_cells)?;
     let durations = durations(spec, shape.param_samples)?;
+    let travel = travel(spec, shape.param_samples)?;
     let mut header = Header {
         total_len: 0,
         rig_hash: spec.rig_hash,
@@ -163,8 +176,14 @@ pub fn write(spec: &TableSpec) -> Result<Vec<u8>, BlobError> {
         samples: Span::default(),
         valid: Span::default(),
         durations: Span::default(),
+        travel: Span::default(),
     };
-    let arrays = [samples.as_slice(), valid.as_slice(), durations.as_slice()];
+    let arrays = [
+        samples.as_slice(),
+        valid.as_slice(),
+        durations.as_slice(),
+        travel.as_slice(),
+    ];
     let encoded = lay_out(&mut header, arrays)?;
     let blob = assemble(&header, &encoded, arrays)?;
     Table::parse(&blob)?;
@@ -193,7 +212,7 @@ fn header_axes(spec: &TableSpec) -> Result<[Axis; MAX_AXES], BlobError> {
             wrap: a.wrap,
             interp: a.interp,
         };
-        if !axis.is_valid() {
+        if marionette_core::grid::Axis::try_from(&axis).is_err() {
             let reason = "needs count ≥ 2, finite min, finite step > 0 and period = count · step";
             return Err(BlobError::Axis {
                 index,
@@ -357,15 +376,38 @@ fn durations(spec: &TableSpec, param_samples: usize) -> Result<Vec<u8>, BlobErro
         .collect())
 }
 
+/// The travel array (looping clips), checked.
+fn travel(spec: &TableSpec, param_samples: usize) -> Result<Vec<u8>, BlobError> {
+    let looping = matches!(spec.kind, Kind::Clips { .. })
+        && spec
+            .axes
+            .last()
+            .is_some_and(|a| matches!(a.wrap, Wrap::Cyclic { .. }));
+    let expected = if looping { param_samples } else { 0 };
+    let ok = spec.travel.iter().flatten().all(|v| v.is_finite());
+    if spec.travel.len() != expected || !ok {
+        return Err(BlobError::Travel {
+            expected,
+            found: spec.travel.len(),
+        });
+    }
+    Ok(spec
+        .travel
+        .iter()
+        .flatten()
+        .flat_map(|v| v.to_le_bytes())
+        .collect())
+}
+
 /// Fills in the header's spans and total length (which change the header's
 /// own varint-coded length, so iterate to the fixed point) and returns the
 /// encoded header.
-fn lay_out(header: &mut Header<'_>, arrays: [&[u8]; 3]) -> Result<Vec<u8>, BlobError> {
+fn lay_out(header: &mut Header<'_>, arrays: [&[u8]; 4]) -> Result<Vec<u8>, BlobError> {
     let mut buf = vec![0_u8; MAX_HEADER_LEN];
     let mut len = table::encode_header(header, &mut buf)?;
     for _ in 0..8 {
         let mut at = align4(PREFIX_LEN + len).ok_or(BlobError::TooLarge)?;
-        let mut spans = [Span::default(); 3];
+        let mut spans = [Span::default(); 4];
         for (span, array) in spans.iter_mut().zip(arrays) {
             *span = Span {
                 offset: to_u32(at)?,
@@ -373,7 +415,12 @@ fn lay_out(header: &mut Header<'_>, arrays: [&[u8]; 3]) -> Result<Vec<u8>, BlobE
             };
             at = align4(at + array.len()).ok_or(BlobError::TooLarge)?;
         }
-        [header.samples, header.valid, header.durations] = spans;
+        [
+            header.samples,
+            header.valid,
+            header.durations,
+            header.travel,
+        ] = spans;
         header.total_len = to_u32(at + CRC_LEN)?;
         let new_len = table::encode_header(header, &mut buf)?;
         if new_len == len {
@@ -386,14 +433,19 @@ fn lay_out(header: &mut Header<'_>, arrays: [&[u8]; 3]) -> Result<Vec<u8>, BlobE
 }
 
 /// Prefix, header, padding, arrays at their offsets, CRC.
-fn assemble(header: &Header<'_>, encoded: &[u8], arrays: [&[u8]; 3]) -> Result<Vec<u8>, BlobError> {
+fn assemble(header: &Header<'_>, encoded: &[u8], arrays: [&[u8]; 4]) -> Result<Vec<u8>, BlobError> {
     let total = header.total_len as usize;
     let mut blob = Vec::with_capacity(total);
     blob.extend_from_slice(&table::prefix(to_u32(encoded.len())?));
     blob.extend_from_slice(encoded);
-    for (span, array) in [header.samples, header.valid, header.durations]
-        .into_iter()
-        .zip(arrays)
+    for (span, array) in [
+        header.samples,
+        header.valid,
+        header.durations,
+        header.travel,
+    ]
+    .into_iter()
+    .zip(arrays)
     {
         blob.resize(span.offset as usize, 0);
         blob.extend_from_slice(array);

@@ -139,6 +139,7 @@ pub fn rest_grid(rig: &RigFile, axes: &[(&str, f32, f32, u16)]) -> Result<Vec<u8
         samples: vec![pose; samples],
         valid: vec![true; cells],
         durations: vec![],
+        travel: vec![],
     };
     blob::write(&spec).map_err(|e: BlobError| PerformError::Table(e.to_string()))
 }

@@ -208,7 +208,15 @@ fn synth_json_has_exactly_the_contract_keys() {
     let blob = build_tiny(dir.path());
     let out: Value =
         serde_json::from_str(&ok(&["synth", s(&blob), "--at", "0.1,0.2", "--json"])).unwrap();
-    assert_eq!(keys(&out), BTreeSet::from(["segments", "duration"]));
+    assert_eq!(
+        keys(&out),
+        BTreeSet::from(["segments", "duration", "clamped", "projected"])
+    );
+    assert_eq!(out["clamped"], false);
+    // Outside the axes: clamped, and the output says so.
+    let far: Value =
+        serde_json::from_str(&ok(&["synth", s(&blob), "--at", "9,0.2", "--json"])).unwrap();
+    assert_eq!(far["clamped"], true);
     for seg in out["segments"].as_array().unwrap() {
         assert_eq!(keys(seg), BTreeSet::from(["name", "position", "rotation"]));
         assert_eq!(seg["position"].as_array().unwrap().len(), 3);
@@ -385,10 +393,25 @@ fn tiny_motion_table_from_mocap() {
         "--json",
     ]))
     .unwrap();
-    assert_eq!(keys(&out), BTreeSet::from(["segments", "duration"]));
+    assert_eq!(
+        keys(&out),
+        BTreeSet::from(["segments", "duration", "clamped", "projected", "travel"])
+    );
     assert!(
         (out["duration"].as_f64().unwrap() - 1.0).abs() < 1e-5,
         "{out}"
+    );
+    // The loop's root travel per cycle: 1.5 m/s for 1 s along +Z (the
+    // heading frame's direction of travel), nothing up or sideways.
+    let travel: Vec<f64> = out["travel"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(
+        travel[0].abs() < 1e-4 && travel[1].abs() < 1e-4 && (travel[2] - 1.5).abs() < 1e-3,
+        "{travel:?}"
     );
     let leg: Vec<f64> = serde_json::from_value(out["segments"][1]["rotation"].clone()).unwrap();
     let half = (30.0 * (0.4 * std::f64::consts::PI).sin() / 2.0).to_radians();

@@ -164,6 +164,7 @@ fn tiny_blob() -> Vec<u8> {
         ],
         valid: vec![true],
         durations: vec![],
+        travel: vec![],
     })
     .expect("tiny spec is valid")
 }

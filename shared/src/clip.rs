@@ -55,11 +55,14 @@
 //!   is `C¹` at the ramps' inner ends. Frame `K` is then dropped, leaving `K`
 //!   frames for a cyclic phase axis. Positions are blended as absolute
 //!   positions, so looping clips must be in place (the host removes the net
-//!   root travel per cycle first; any leftover travel is blended away here).
+//!   root travel per cycle first, on all three axes, and stores it in the
+//!   table: [`Motion::travel`] interpolates it like the durations, and the
+//!   figure advances by it each cycle; any leftover mismatch is blended
+//!   away here).
 
 use glam::{Quat, Vec3};
 
-use crate::grid::{Adjust, AxisKind, Grid, GridError, MAX_AXES, Samples};
+use crate::grid::{Adjust, Grid, GridError, MAX_AXES, Samples, Wrap};
 use crate::math::{self, SlerpWeight};
 use crate::pose::Pose;
 
@@ -97,6 +100,13 @@ impl From<GridError> for ClipError {
 pub trait Durations {
     /// The duration, or `None` if absent.
     fn duration(&self, index: usize, phase: usize) -> Option<f32>;
+
+    /// A looping clip's root displacement over one cycle at parameter
+    /// sample `index` (clip frame, metres); `None` if not stored.
+    fn travel(&self, index: usize) -> Option<Vec3> {
+        let _ = index;
+        None
+    }
 }
 
 /// In-memory durations, `[parameter sample][phase]`.
@@ -123,6 +133,10 @@ impl Durations for crate::table::Table<'_> {
     fn duration(&self, index: usize, phase: usize) -> Option<f32> {
         crate::table::Table::duration(self, index, phase)
     }
+
+    fn travel(&self, index: usize) -> Option<Vec3> {
+        crate::table::Table::travel(self, index)
+    }
 }
 
 /// A set of clips on a parameter grid (see the module doc).
@@ -144,6 +158,7 @@ pub struct Motion {
     phases: usize,
     looping: bool,
     adjust: Adjust,
+    travel: Vec3,
 }
 
 impl<'a> Clips<'a> {
@@ -159,9 +174,9 @@ impl<'a> Clips<'a> {
         };
         let same = head.len() == p.len() && head.iter().zip(p).all(|(a, b)| a == b);
         let n = phases as f32;
-        let ok = match phase.kind {
-            AxisKind::Cyclic { period } => phases == 1 && math::abs(period - 1.0) <= 1e-5,
-            AxisKind::Bounded => {
+        let ok = match phase.wrap {
+            Wrap::Cyclic { period } => phases == 1 && math::abs(period - 1.0) <= 1e-5,
+            Wrap::Bounded => {
                 let frames = phase.count - 1;
                 math::abs(phase.step * frames as f32 - n) <= 1e-5 * n
                     && frames.checked_rem(phases as u32) == Some(0)
@@ -170,7 +185,7 @@ impl<'a> Clips<'a> {
         if !same || !ok || phase.min != 0.0 {
             return Err(ClipError::Layout);
         }
-        let looping = matches!(phase.kind, AxisKind::Cyclic { .. });
+        let looping = matches!(phase.wrap, Wrap::Cyclic { .. });
         Ok(Self {
             grid,
             params,
@@ -201,6 +216,7 @@ impl<'a> Clips<'a> {
             phases: self.phases,
             looping: self.looping,
             adjust: q.adjust(),
+            travel: Vec3::ZERO,
         };
         for (d, &p) in m.params.iter_mut().zip(q.params()) {
             *d = p;
@@ -219,6 +235,14 @@ impl<'a> Clips<'a> {
             }
             // Catmull-Rom weights can overshoot; a duration stays positive.
             *slot = acc.max(1e-6);
+        }
+        if self.looping {
+            let mut acc = Vec3::ZERO;
+            for (&index, &w) in window.indices().iter().zip(window.weights()) {
+                // A table without stored travel (version 1) loops in place.
+                acc += durations.travel(index as usize).unwrap_or(Vec3::ZERO) * w;
+            }
+            m.travel = acc;
         }
         Ok(m)
     }
@@ -279,6 +303,14 @@ impl Motion {
     #[must_use]
     pub fn durations(&self) -> &[f32] {
         self.durations.get(..self.phases).unwrap_or(&[])
+    }
+
+    /// A loop's root displacement over one cycle (the clip frame, metres),
+    /// interpolated like the durations: the figure advances by it each cycle
+    /// (zero for a one-shot motion or a table that stores none).
+    #[must_use]
+    pub fn travel(&self) -> Vec3 {
+        self.travel
     }
 
     /// Total duration (one cycle for a loop), seconds.
@@ -508,6 +540,7 @@ mod tests {
             phases: 2,
             looping: false,
             adjust: Adjust::None,
+            travel: Vec3::ZERO,
         };
         assert_eq!(m.duration(), 4.0);
         assert_eq!(m.phase_at(0.5), Ok(0.5));
@@ -533,7 +566,7 @@ mod tests {
             min: 0.0,
             step: 0.25,
             count: 4,
-            kind: AxisKind::Cyclic { period: 1.0 },
+            wrap: Wrap::Cyclic { period: 1.0 },
             interp: Interp::Linear,
         };
         let grid = Grid::new(&[speed, cyc], None).unwrap();

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use glam::{Quat, Vec3};
-use marionette_core::grid::{Axis, AxisKind, Grid, Interp, SliceSamples};
+use marionette_core::grid::{Axis, Grid, Interp, SliceSamples, Wrap};
 use marionette_core::pose::Pose;
 
 const SEGMENTS: usize = 31;
@@ -143,7 +143,7 @@ fn bench(c: &mut Criterion) {
             min: 0.0,
             step: tau / 8.0,
             count: 8,
-            kind: AxisKind::Cyclic { period: tau },
+            wrap: Wrap::Cyclic { period: tau },
             interp: Interp::CatmullRom,
         },
     ];

@@ -20,23 +20,25 @@
 //! error and the mean per-joint position error, both in the build frame.
 //! For a grid table on a rig of at most 64 segments it then solves the hand
 //! goal with the core's default solver ([`marionette_core::solve`], whole-tree
-//! damped least squares, root fixed) starting from the synthesized pose, and
-//! reports both errors again.
-
-use std::f32::consts::PI;
+//! damped least squares, root fixed, the rig file's joints and limits)
+//! starting from the synthesized pose, and reports both errors again.
+//!
+//! The baseline, measured in the same run on the same held-out examples, is
+//! the **nearest example**: each held-out example predicted by the training
+//! example (from the other clips) with the nearest parameters (Euclidean, in
+//! axis units), its whole pose or clip taken as is ([`Baseline`]). A table is
+//! worth its flash only if it beats that.
 
 use glam::{Quat, Vec3};
-use marionette_core::body::{Angles, Axis, Body, Dof, Joint, Segment};
-use marionette_core::goal::{Goal, GoalSet};
 use marionette_core::grid::{Adjust, SliceSamples};
-use marionette_core::pose::{self, LocalPose, Pose};
-use marionette_core::solve::{self, Solver};
+use marionette_core::pose::Pose;
 use marionette_core::table::{Table, Wrap};
 use serde::Serialize;
 
 use super::error::BuildError;
+use super::place::RigBody;
 use super::resample::{self, Value, compare, median};
-use super::retarget::{CAP, Rig};
+use super::retarget::CAP;
 use super::spec::Spec;
 use super::{Dataset, Layout, Progress, query};
 use crate::blob::TableSpec;
@@ -232,6 +234,61 @@ pub struct Holdout {
     pub duration_error: Option<f64>,
     /// After solving the hand goal (grid tables).
     pub solved: Option<Solved>,
+    /// The baseline: each held-out example predicted by the nearest
+    /// training example (nearest parameters, whole pose or clip).
+    pub nearest: Baseline,
+    /// Per held-out example: hand error of the table, metres.
+    #[serde(skip)]
+    pub probe_errors: Vec<f64>,
+    /// Per held-out example: mean per-joint error of the table, metres.
+    #[serde(skip)]
+    pub joint_errors: Vec<f64>,
+}
+
+/// The nearest-example baseline of one hold-out.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Baseline {
+    /// Median hand (probe) position error, metres.
+    pub median_probe: Option<f64>,
+    /// Mean over examples of the mean per-joint position error, metres.
+    pub mean_joint: f64,
+    /// Per held-out example: hand error, metres.
+    #[serde(skip)]
+    pub probe_errors: Vec<f64>,
+    /// Per held-out example: mean per-joint error, metres.
+    #[serde(skip)]
+    pub joint_errors: Vec<f64>,
+}
+
+/// The nearest-example baseline: each held-out record predicted by the
+/// training record with the nearest parameters (Euclidean, axis units).
+fn nearest_baseline(data: &Dataset, group: usize) -> Baseline {
+    let train: Vec<&resample::Record> = data.records.iter().filter(|r| r.group != group).collect();
+    let mut b = Baseline {
+        median_probe: None,
+        mean_joint: f64::NAN,
+        probe_errors: Vec::new(),
+        joint_errors: Vec::new(),
+    };
+    let probe = data.probe.map(|i| (i, data.probe_point));
+    for r in data.records.iter().filter(|r| r.group == group) {
+        let d2 = |t: &resample::Record| -> f64 {
+            t.params
+                .iter()
+                .zip(&r.params)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum()
+        };
+        let Some(near) = train.iter().min_by(|a, b| d2(a).total_cmp(&d2(b))) else {
+            continue;
+        };
+        let e = compare(&near.value, &r.value, probe);
+        b.joint_errors.push(e.mean_position);
+        b.probe_errors.extend(e.probe);
+    }
+    b.mean_joint = resample::mean(&b.joint_errors);
+    b.median_probe = median(&mut b.probe_errors.clone());
+    b
 }
 
 /// Leaves group `group` out, builds from the rest, and measures (see the
@@ -286,7 +343,7 @@ pub fn holdout(
                 .zip(&r.value.scalars)
                 .map(|(p, t)| ((p - t) / t).abs())
                 .sum();
-            durations.push(rel / r.value.scalars.len() as f64);
+            durations.push(rel / pred.scalars.len().max(1) as f64);
         }
         if let (Some(body), Some((_, seg))) = (&body, solver) {
             let (p, q) = r.value.poses[seg];
@@ -294,7 +351,7 @@ pub fn holdout(
             let target = (p + q * point).as_vec3();
             match body.solve(&frames[0], seg, point.as_vec3(), target) {
                 Some(solved) => {
-                    let e = compare(&solved, &r.value, Some((seg, point)));
+                    let e = compare(&solved.value, &r.value, Some((seg, point)));
                     solved_joint.push(e.mean_position);
                     solved_probe.extend(e.probe);
                 }
@@ -303,7 +360,12 @@ pub fn holdout(
         }
         progress.tick();
     }
+    let probe_errors = probes.clone();
+    let joint_errors = joints.clone();
     Ok(Holdout {
+        nearest: nearest_baseline(data, group),
+        probe_errors,
+        joint_errors,
         clip: data.groups.get(group).cloned().unwrap_or_default(),
         examples: held.len(),
         method: built.report.method.to_string(),
@@ -319,98 +381,5 @@ pub fn holdout(
             mean_joint: resample::mean(&solved_joint),
             failures,
         }),
-    })
-}
-
-/// The rig as a core body for the solver. From a rig file: the file's
-/// joints, limits and touch points (through the core's runtime rig).
-/// Without one: every joint a 3-DOF ball (Z, Y, X, ±180°).
-struct RigBody {
-    names: Vec<String>,
-    parents: Vec<u8>,
-    offsets: Vec<Vec3>,
-    file: Option<Box<crate::rigfile::RigFile>>,
-}
-
-impl RigBody {
-    fn new(rig: &Rig) -> Option<Self> {
-        (rig.names.len() <= marionette_core::pose::MAX_SEGMENTS).then(|| Self {
-            names: rig.names.clone(),
-            parents: rig.parents.clone(),
-            offsets: rig.offsets.clone(),
-            file: rig.file.clone(),
-        })
-    }
-
-    /// Solves `point` of `segment` (in its frame) to `target` from the
-    /// synthesized `pose`.
-    fn solve(
-        &self,
-        pose: &[(Vec3, Quat)],
-        segment: usize,
-        point: Vec3,
-        target: Vec3,
-    ) -> Option<Value> {
-        if let Some(file) = &self.file {
-            let desc = file.desc();
-            let rig = marionette_core::rig::Rig::from_desc(&desc).ok()?;
-            return solve_body(&rig.body(), pose, segment, point, target);
-        }
-        let ball = Joint::three(
-            Dof::new(Axis::Z, -PI, PI),
-            Dof::new(Axis::Y, -PI, PI),
-            Dof::new(Axis::X, -PI, PI),
-        );
-        let segments: Vec<Segment<'_>> = self
-            .names
-            .iter()
-            .zip(&self.parents)
-            .zip(&self.offsets)
-            .enumerate()
-            .map(|(i, ((name, &parent), &origin))| Segment {
-                name,
-                parent,
-                origin,
-                joint: if i == 0 { Joint::FIXED } else { ball },
-                touch: Vec3::ZERO,
-            })
-            .collect();
-        let body = Body {
-            segments: &segments,
-            parents: &self.parents,
-            offsets: &self.offsets,
-        };
-        solve_body(&body, pose, segment, point, target)
-    }
-}
-
-/// The core's default solve of one point goal (`point` of the segment at
-/// `target`), warm-started from `pose` projected onto the body's joints.
-fn solve_body(
-    body: &Body<'_>,
-    pose: &[(Vec3, Quat)],
-    segment: usize,
-    point: Vec3,
-    target: Vec3,
-) -> Option<Value> {
-    let mut p = Pose::<64>::new(pose.len()).ok()?;
-    for (i, (pos, rot)) in pose.iter().enumerate() {
-        p.set(i, *pos, *rot).ok()?;
-    }
-    let mut local = LocalPose::<64>::default();
-    pose::to_local(&body.hierarchy(), &p, &mut local).ok()?;
-    let mut angles = Angles::<64>::from_local(body, &local).ok()?;
-    let mut goals = GoalSet::<1>::new();
-    let goal = Goal::reach(u8::try_from(segment).ok()?, target, 1.0).at(point);
-    goals.push(goal).ok()?;
-    solve::solve(&Solver::DEFAULT, body, &goals, &mut angles, &mut p).ok()?;
-    Some(Value {
-        poses: p
-            .positions()
-            .iter()
-            .zip(p.rotations())
-            .map(|(a, b)| (a.as_dvec3(), b.as_dquat()))
-            .collect(),
-        scalars: Vec::new(),
     })
 }

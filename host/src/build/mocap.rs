@@ -23,8 +23,10 @@
 //!   phase is time-resampled with [`marionette_core::clip::resample`] to the
 //!   common frame count (W&H Fig. 6). A looping clip (one phase, `last` one
 //!   period after `first`) is first made "in place": the frame's +Z is the
-//!   direction of travel from `first` to `last`, and the root's net travel is
-//!   removed linearly in time from every position; then
+//!   direction of travel from `first` to `last`, and the root's net
+//!   displacement on all three axes (a climb on a slope too) is removed
+//!   linearly in time from every position and stored as the cycle's root
+//!   travel (the table's `travel` array); then
 //!   [`marionette_core::clip::seam_blend`] spreads the remaining mismatch
 //!   over the ends. Each phase's duration is its frame span times the frame
 //!   time. Parameters: a segment's position at the first phase boundary
@@ -61,6 +63,8 @@ pub struct Mocap {
     pub rig: Rig,
     /// The clips, in spec order.
     pub clips: Vec<Clip>,
+    /// Clips whose frame rate looks wrong ([`rate_warnings`]).
+    pub warnings: Vec<String>,
 }
 
 /// Imports and retargets every clip of the spec.
@@ -95,7 +99,7 @@ pub fn load(spec: &Spec, m: &MocapSpec, tick: &dyn Fn(&str)) -> Result<Mocap, Bu
                 .into());
         }
         let Some(rig) = rig.as_ref() else { continue };
-        let frame_time = m.fps.map_or(motion.frame_time, |f| 1.0 / f);
+        let frame_time = c.fps.or(m.fps).map_or(motion.frame_time, |f| 1.0 / f);
         let poses = retarget_all(&motion, &sk, rig)?;
         clips.push(Clip {
             name: c.name.clone(),
@@ -104,7 +108,80 @@ pub fn load(spec: &Spec, m: &MocapSpec, tick: &dyn Fn(&str)) -> Result<Mocap, Bu
         });
     }
     let rig = rig.ok_or_else(|| BuildError::Data("no clip".to_owned()))?;
-    Ok(Mocap { rig, clips })
+    let speed_axis = spec.axes.iter().any(|a| a.measure == Measure::Speed);
+    let warnings = rate_warnings(spec, m, &clips, speed_axis);
+    Ok(Mocap {
+        rig,
+        clips,
+        warnings,
+    })
+}
+
+/// A clip moving slower than this (m/s) is not compared: standing clips
+/// (reaches) have no speed to judge a rate by.
+const MOVING: f64 = 0.2;
+
+/// Faster than any human gait (m/s): the rate must be wrong.
+const TOO_FAST: f64 = 10.0;
+
+/// A clip whose speed is this many times off the other clips' median is
+/// suspect (a 120 fps header on 60 fps data doubles it).
+const SPEED_RATIO: f64 = 1.5;
+
+/// The root's net horizontal travel over the clip divided by its duration,
+/// m/s (the rig's units).
+#[must_use]
+pub fn root_speed(clip: &Clip) -> f64 {
+    let (Some(first), Some(last)) = (clip.poses.first(), clip.poses.last()) else {
+        return 0.0;
+    };
+    let d = last[0].0 - first[0].0;
+    let seconds = (clip.poses.len().saturating_sub(1)) as f64 * clip.frame_time;
+    if seconds > 0.0 {
+        d.x.hypot(d.z) / seconds
+    } else {
+        0.0
+    }
+}
+
+/// Warnings for clips whose root speed is implausible for their frame rate:
+/// faster than [`TOO_FAST`], or, when no axis measures speed (so the clips
+/// are one kind of motion at a similar pace, like walks on different
+/// slopes), [`SPEED_RATIO`] times faster or slower than the median of the
+/// other moving clips. Each names the clip, its rate and the fix.
+fn rate_warnings(spec: &Spec, m: &MocapSpec, clips: &[Clip], speed_axis: bool) -> Vec<String> {
+    let speeds: Vec<f64> = clips.iter().map(root_speed).collect();
+    let mut out = Vec::new();
+    for (i, (clip, &v)) in clips.iter().zip(&speeds).enumerate() {
+        let fps = 1.0 / clip.frame_time;
+        let mut others: Vec<f64> = speeds
+            .iter()
+            .enumerate()
+            .filter(|&(j, &s)| j != i && s >= MOVING)
+            .map(|(_, &s)| s)
+            .collect();
+        others.sort_by(f64::total_cmp);
+        let median = others.get(others.len() / 2).copied();
+        let why = if v > TOO_FAST {
+            Some(format!("faster than any gait ({TOO_FAST} m/s)"))
+        } else if let (false, true, Some(m)) = (speed_axis, v >= MOVING, median) {
+            let ratio = v / m;
+            (!(1.0 / SPEED_RATIO..=SPEED_RATIO).contains(&ratio))
+                .then(|| format!("{ratio:.2}x the other clips' median {m:.2} m/s"))
+        } else {
+            None
+        };
+        if let Some(why) = why {
+            let line = m.clips.get(i).map_or(0, |c| c.line);
+            let problem = format!(
+                "{}: root speed {v:.2} m/s at {fps:.0} fps is {why}; if the file's frame rate is wrong, set `fps` on the clip",
+                clip.name
+            );
+            let field = format!("clip[{i}].fps");
+            out.push(spec.source.error_line(line, &field, problem).to_string());
+        }
+    }
+    out
 }
 
 fn import_clip(spec: &Spec, m: &MocapSpec, c: &ClipSpec, i: usize) -> Result<Motion, BuildError> {
@@ -119,7 +196,10 @@ fn import_clip(spec: &Spec, m: &MocapSpec, c: &ClipSpec, i: usize) -> Result<Mot
                 let problem = "an AMC clip needs `skeleton = \"file.asf\"` in [mocap]";
                 return Err(spec.source.error_line(c.line, &field, problem).into());
             };
-            let frame_time = m.fps.map_or(import::amc::HDM05_FRAME_TIME, |f| 1.0 / f);
+            let frame_time = c
+                .fps
+                .or(m.fps)
+                .map_or(import::amc::HDM05_FRAME_TIME, |f| 1.0 / f);
             Ok(import::amc::read_motion(asf, &c.file, frame_time)?)
         }
         Some("bvh") => Ok(import::bvh::read_motion(&c.file, m.scale)?),
@@ -218,6 +298,12 @@ impl Frame {
             origin: root.0,
             ..self
         }
+    }
+
+    /// A point in this frame.
+    #[must_use]
+    pub fn point(&self, p: DVec3) -> DVec3 {
+        self.rot * (p - self.origin)
     }
 
     /// A pose in this frame.
@@ -358,7 +444,11 @@ pub fn clip_records(
                 .into());
         }
         let first = c.cut[0];
-        let (frames, travel) = normalized_clip(spec, &spec.motion, clip, first, last, forward);
+        let Normalized {
+            frames,
+            horizontal,
+            travel,
+        } = normalized_clip(spec, &spec.motion, clip, first, last, forward);
         let poses = time_resample(&spec.motion, &frames, &c.cut, clip.frame_time, segments)
             .map_err(|e| pose_error(&clip.name, e))?;
         let durations: Vec<f64> = c
@@ -374,7 +464,7 @@ pub fn clip_records(
             .zip(&segs)
             .enumerate()
             .map(|(k, (a, &s))| match a.measure {
-                Measure::Speed => travel / total,
+                Measure::Speed => horizontal / total,
                 _ => position_param(a, s, &frames[at])
                     .or_else(|| c.params.as_ref().and_then(|p| p.get(k).copied()))
                     .unwrap_or(0.0),
@@ -384,7 +474,13 @@ pub fn clip_records(
             params,
             value: Value {
                 poses,
-                scalars: durations,
+                // A loop's root travel rides with the durations (blended
+                // with the same weights); `table_spec` splits them.
+                scalars: if spec.motion.looping {
+                    durations.into_iter().chain(travel.to_array()).collect()
+                } else {
+                    durations
+                },
             },
             group: g,
         });
@@ -411,8 +507,22 @@ fn phases_of(cut: &[usize], frames: Vec<Vec<Seg>>) -> Originals {
         .collect()
 }
 
-/// Frames `first..=last` in the clip's frame (travel removed when looping);
-/// also returns the horizontal travel in metres.
+/// A clip cut to `first..=last` and put in its frame.
+struct Normalized {
+    /// The frames (for a loop: net root travel removed, see below).
+    frames: Vec<Vec<Seg>>,
+    /// The root's net horizontal travel, metres.
+    horizontal: f64,
+    /// For a loop: the root's net displacement from `first` to `last` in
+    /// the clip frame, on all three axes (a climb too), which was removed
+    /// from the frames linearly in time; zero otherwise.
+    travel: DVec3,
+}
+
+/// Frames `first..=last` in the clip's frame. A looping clip is made "in
+/// place" on all three axes: its net root displacement is removed linearly
+/// in time (so a walk up a slope no longer climbs inside its cycle) and
+/// returned, to be stored as the cycle's root displacement.
 fn normalized_clip(
     spec: &Spec,
     motion: &MotionSpec,
@@ -420,12 +530,13 @@ fn normalized_clip(
     first: usize,
     last: usize,
     forward: DVec3,
-) -> (Vec<Vec<Seg>>, f64) {
+) -> Normalized {
     let start = clip.poses[first][0];
     let end = clip.poses[last][0];
-    let d = DVec3::new(end.0.x - start.0.x, 0.0, end.0.z - start.0.z);
-    let travel = d.length();
-    let direction = (motion.looping && travel > 0.05).then_some(d);
+    let moved = end.0 - start.0;
+    let d = DVec3::new(moved.x, 0.0, moved.z);
+    let horizontal = d.length();
+    let direction = (motion.looping && horizontal > 0.05).then_some(d);
     let frame = match spec.frame {
         FrameKind::Heading => Frame::heading(&start, forward, direction),
         // `stand` is refused for motion tables by the spec parser; as `root`.
@@ -435,18 +546,24 @@ fn normalized_clip(
         FrameKind::World => Frame::WORLD,
     };
     let span = (last - first) as f64;
-    let local_travel = frame.rot * d;
+    let travel = if motion.looping {
+        frame.rot * moved
+    } else {
+        DVec3::ZERO
+    };
     let frames = (first..=last)
         .map(|f| {
             let mut pose = frame.apply(&clip.poses[f]);
-            if motion.looping {
-                let shift = local_travel * ((f - first) as f64 / span);
-                pose.iter_mut().for_each(|s| s.0 -= shift);
-            }
+            let shift = travel * ((f - first) as f64 / span);
+            pose.iter_mut().for_each(|s| s.0 -= shift);
             pose
         })
         .collect();
-    (frames, travel)
+    Normalized {
+        frames,
+        horizontal,
+        travel,
+    }
 }
 
 /// Resamples each phase to `motion.frames` steps (W&H Fig. 6) and, for a

@@ -12,7 +12,10 @@
 //! 2. **Resampling** onto the regular grid ([`resample`]): the method (IDW,
 //!    Gaussian RBF, local linear regression, each with a few settings) is
 //!    chosen by cross-validated held-out error, and cells far from every
-//!    example are marked invalid.
+//!    example are marked invalid. On a grid of one point's x, y and z (the
+//!    hand), each resampled pose is then solved so that point sits on its
+//!    grid point ([`place`]); the cross-validation scores the methods with
+//!    that step included.
 //! 3. **Writing** with the one blob writer, [`crate::blob::write`], which
 //!    quantizes (12 bytes per segment sample, error bound in the header) and
 //!    checksums; the blob is read back with the core reader and the
@@ -21,17 +24,19 @@
 //!
 //! [`measure::holdout`] leaves one clip out, builds from the rest and
 //! synthesizes at the held-out clip's parameters with the core, reading the
-//! blob in place.
+//! blob in place, beside the nearest-example baseline.
 
 pub mod error;
 pub mod examples;
 pub mod measure;
 pub mod mocap;
+pub mod place;
 pub mod query;
 pub mod resample;
 pub mod retarget;
 pub mod spec;
 
+use std::cell::Cell;
 use std::time::Instant;
 
 use glam::{DQuat, DVec3, Quat, Vec3};
@@ -42,7 +47,7 @@ use crate::blob::{self, AxisSpec, TableSpec};
 pub use error::{BuildError, InputError};
 use resample::{Method, Record, Score, Space, Value};
 use retarget::{CAP, Fnv, Rig};
-use spec::{Input, Spec};
+use spec::{Input, ResampleSpec, Spec};
 
 /// One segment of a pose: absolute position (m) and rotation.
 pub type Seg = (DVec3, DQuat);
@@ -175,10 +180,19 @@ pub struct Dataset {
     /// The point of the probe segment the parameters are measured at, in
     /// the segment's frame (an axis' `point`; zero: its origin).
     pub probe_point: glam::DVec3,
+    /// The axes measuring the probe's x, y and z, when the axes are exactly
+    /// those three (a hand-position grid; see [`place`]).
+    pub probe_axes: Option<[usize; 3]>,
+    /// Maps a point given by the parameters into the poses' frame (the
+    /// identity but for `frame = "stand"`).
+    pub param_frame: mocap::Frame,
     /// Clip tables: each group's normalized source frames with their phases.
     pub originals: Vec<mocap::Originals>,
     /// Seconds spent importing.
     pub load_seconds: f64,
+    /// Import warnings (a clip whose frame rate looks wrong), each naming
+    /// the spec file, line and field.
+    pub warnings: Vec<String>,
 }
 
 /// Progress reporting (an indicatif bar on a terminal, nothing otherwise).
@@ -305,8 +319,11 @@ fn from_examples(set: &examples::ExampleSet) -> Dataset {
         probe: None,
         probe_segment: None,
         probe_point: glam::DVec3::ZERO,
+        probe_axes: None,
+        param_frame: mocap::Frame::WORLD,
         originals: Vec::new(),
         load_seconds: 0.0,
+        warnings: Vec::new(),
     }
 }
 
@@ -385,20 +402,46 @@ fn from_mocap(
     };
     let segments = mocap.rig.names.len();
     let probe = probe_segment.map(|s| at_frame * segments + s);
+    let probe_axes = probe_segment.and_then(|_| probe_axes(spec));
+    let param_frame = if spec.frame == spec::FrameKind::Stand {
+        let (p, q) = mocap.rig.rest_root();
+        mocap::Frame::placing(p, q)
+    } else {
+        mocap::Frame::WORLD
+    };
     Ok(Dataset {
         segments: mocap.rig.names.clone(),
         axes,
         records,
         groups: mocap.clips.iter().map(|c| c.name.clone()).collect(),
+        warnings: mocap.warnings,
         layout,
         rig_hash: mocap.rig.hash,
         rig: Some(mocap.rig),
         probe,
         probe_segment,
         probe_point: glam::DVec3::from_array(probe_point),
+        probe_axes,
+        param_frame,
         originals,
         load_seconds: 0.0,
     })
+}
+
+/// The axes measuring x, y and z of one probe, when those are all the axes.
+fn probe_axes(spec: &Spec) -> Option<[usize; 3]> {
+    let mut out = [None; 3];
+    for (i, a) in spec.axes.iter().enumerate() {
+        let spec::Measure::Position { component, .. } = a.measure else {
+            return None;
+        };
+        let slot = out.get_mut(component)?;
+        if slot.replace(i).is_some() {
+            return None;
+        }
+    }
+    let [x, y, z] = out;
+    Some([x?, y?, z?])
 }
 
 /// The measured facts of one build.
@@ -420,6 +463,11 @@ pub struct Report {
     pub cells: usize,
     /// Grid samples taken exactly from an example.
     pub exact: usize,
+    /// Grid samples whose probe the build solved onto its grid point
+    /// ([`place`]; 0 when the table is not a probe-position grid).
+    pub placed: usize,
+    /// Grid samples a placement was tried on (the resampled ones).
+    pub place_tried: Option<usize>,
     /// Blob size, bytes.
     pub bytes: usize,
     /// Measured quantization error.
@@ -441,9 +489,21 @@ pub struct Built {
     pub report: Report,
 }
 
-/// The post-processing of a resampled value: limb-length enforcement.
-fn post(data: &Dataset, enforce: bool) -> impl Fn(&mut Value) + '_ {
-    move |v: &mut Value| {
+/// The post-processing of a resampled value at `params`: the probe placed
+/// on its point ([`place`]) where the spec asks and the rig reaches it,
+/// else limb-length enforcement. Counts the placements in `placed`.
+fn post<'a>(
+    data: &'a Dataset,
+    spec: &ResampleSpec,
+    placed: &'a Cell<usize>,
+) -> impl Fn(&[f64], &mut Value) + 'a {
+    let placer = place::Placer::new(data).filter(|_| spec.place_probe);
+    let enforce = spec.enforce_lengths;
+    move |params: &[f64], v: &mut Value| {
+        if placer.as_ref().is_some_and(|p| p.place(params, v)) {
+            placed.set(placed.get() + 1);
+            return;
+        }
         let (Some(rig), true) = (&data.rig, enforce) else {
             return;
         };
@@ -480,7 +540,8 @@ pub fn build(
         return Err(BuildError::Data("no example left to build from".to_owned()));
     }
     let space = Space::new(&data.axes);
-    let post = post(data, spec.resample.enforce_lengths);
+    let scored = Cell::new(0);
+    let post_cv = post(data, &spec.resample, &scored);
     let t0 = Instant::now();
     let candidates = Method::candidates(&spec.resample.method);
     let folds = resample::folds(&records);
@@ -492,7 +553,7 @@ pub fn build(
             .iter()
             .map(|&m| {
                 let probe = data.probe.map(|i| (i, data.probe_point));
-                let s = resample::score(&space, &records, &folds, m, probe, &post);
+                let s = resample::score(&space, &records, &folds, m, probe, &post_cv);
                 progress.tick();
                 s
             })
@@ -510,6 +571,8 @@ pub fn build(
         .unwrap_or_else(|| (data.axes.len() as f64).sqrt() / 2.0);
     let points: usize = data.axes.iter().map(|a| usize::from(a.count)).product();
     progress.stage("resampling onto the grid", points);
+    let placed = Cell::new(0);
+    let post = post(data, &spec.resample, &placed);
     let grid = resample::grid(&space, &records, method, radius, &post, &|| progress.tick());
     let t2 = Instant::now();
     let table = table_spec(data, &grid)?;
@@ -528,6 +591,9 @@ pub fn build(
         valid_cells: grid.valid.iter().filter(|v| **v).count(),
         cells: grid.valid.len(),
         exact: grid.exact,
+        placed: placed.get(),
+        place_tried: (place::Placer::new(data).is_some() && spec.resample.place_probe)
+            .then(|| table.samples.len() - grid.exact),
         bytes: blob.len(),
         quant,
         reconstruction,
@@ -558,10 +624,11 @@ fn table_spec(data: &Dataset, grid: &resample::Resampled) -> Result<TableSpec, B
         s.iter().map(|(p, q)| (p.as_vec3(), q.as_quat())).collect()
     };
     let mut axes: Vec<AxisSpec> = data.axes.iter().map(AxisDef::to_blob).collect();
-    let (kind, samples, durations) = match data.layout {
+    let (kind, samples, durations, travel) = match data.layout {
         Layout::Grid => (
             Kind::Grid,
             grid.values.iter().map(|v| f32_pose(&v.poses)).collect(),
+            Vec::new(),
             Vec::new(),
         ),
         Layout::Clips {
@@ -592,14 +659,27 @@ fn table_spec(data: &Dataset, grid: &resample::Resampled) -> Result<TableSpec, B
                     samples.push(f32_pose(&v.poses[f * n..(f + 1) * n]));
                 }
             }
+            // Scalars: the phase durations, then a loop's root travel x, y, z.
             let durations = grid
                 .values
                 .iter()
-                .flat_map(|v| v.scalars.iter().map(|&d| (d as f32).max(1e-3)))
+                .flat_map(|v| v.scalars.iter().take(phases))
+                .map(|&d| (d as f32).max(1e-3))
                 .collect();
+            let travel = if looping {
+                grid.values
+                    .iter()
+                    .map(|v| {
+                        let t = |k: usize| v.scalars.get(phases + k).map_or(0.0, |&x| x as f32);
+                        [t(0), t(1), t(2)]
+                    })
+                    .collect()
+            } else {
+                Vec::new()
+            };
             let phases =
                 u8::try_from(phases).map_err(|_| BuildError::Data("too many phases".to_owned()))?;
-            (Kind::Clips { phases }, samples, durations)
+            (Kind::Clips { phases }, samples, durations, travel)
         }
     };
     Ok(TableSpec {
@@ -610,5 +690,6 @@ fn table_spec(data: &Dataset, grid: &resample::Resampled) -> Result<TableSpec, B
         samples,
         valid: grid.valid.clone(),
         durations,
+        travel,
     })
 }

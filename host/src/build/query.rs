@@ -54,7 +54,11 @@ pub struct Synth {
     pub duration: Option<f32>,
     /// Per-phase durations (clip tables).
     pub durations: Vec<f32>,
-    /// What the query did to the parameters.
+    /// A looping clip's root displacement per cycle (x, y, z metres, the
+    /// clip frame): the figure advances by it each cycle.
+    pub travel: Option<[f32; 3]>,
+    /// What the query did to the parameters (or, for a one-shot clip
+    /// table, to a phase outside `[0, phases]`: clamped).
     pub adjust: Adjust,
     /// The parameters actually used.
     pub params: Vec<f32>,
@@ -102,6 +106,7 @@ pub fn synthesize(
                 pose: pose_vec(&out),
                 duration: None,
                 durations: Vec::new(),
+                travel: None,
                 adjust: q.adjust(),
                 params: q.params().to_vec(),
             })
@@ -109,12 +114,18 @@ pub fn synthesize(
         Kind::Clips { phases } => {
             let clips = Clips::new(table.grid()?, table.param_grid()?, usize::from(phases))?;
             let motion = clips.motion(table, params)?;
-            clips.pose(&motion, table, phase.unwrap_or(0.0), &mut out)?;
+            let phase_adjust = clips.pose(&motion, table, phase.unwrap_or(0.0), &mut out)?;
+            // A phase outside a one-shot motion is clamped: say so.
+            let adjust = match (motion.adjust(), phase_adjust) {
+                (Adjust::None, Adjust::Clamped) => Adjust::Clamped,
+                (a, _) => a,
+            };
             Ok(Synth {
                 pose: pose_vec(&out),
                 duration: Some(motion.duration()),
                 durations: motion.durations().to_vec(),
-                adjust: motion.adjust(),
+                travel: clips.looping().then(|| motion.travel().to_array()),
+                adjust,
                 params: motion.params().to_vec(),
             })
         }

@@ -48,9 +48,13 @@
 //!
 //! # Validity
 //!
-//! A cell is valid when its centre lies within `radius` cells of some
-//! example (default `√p / 2`, the half-diagonal of a cell in `p` dimensions:
-//! an example inside or touching the cell's circumsphere).
+//! A cell is valid when data back it: each of its `2^p` corners lies
+//! within `radius` cells of some example, or its centre does (default
+//! radius `√p / 2`, the half-diagonal of a cell in `p` dimensions: an example
+//! inside or touching the cell's circumsphere). So a cell whose corners are
+//! all examples (Wiley & Hahn's data captured on a regular grid) is always
+//! valid, whatever the radius; a cell that scattered data (a few reach
+//! trajectories) cross near its middle is valid too.
 
 use glam::{DQuat, DVec3};
 
@@ -169,6 +173,16 @@ impl Space {
             .collect()
     }
 
+    /// Parameters (axis units) of a point in cell units.
+    #[must_use]
+    pub fn params(&self, cells: &[f64]) -> Vec<f64> {
+        self.axes
+            .iter()
+            .zip(cells)
+            .map(|(a, &u)| a.min + u * a.step())
+            .collect()
+    }
+
     /// Per-axis difference `a − b` in cell units (wrapped on cyclic axes).
     fn diff(&self, a: &[f64], b: &[f64], out: &mut [f64]) {
         for (((o, ax), &x), &y) in out.iter_mut().zip(&self.axes).zip(a).zip(b) {
@@ -201,6 +215,39 @@ impl Space {
     pub fn grid_points(&self) -> Vec<Vec<f64>> {
         let counts: Vec<usize> = self.axes.iter().map(|a| usize::from(a.count)).collect();
         lattice(&counts, 0.0)
+    }
+
+    /// Number of cells.
+    #[must_use]
+    pub fn cell_count(&self) -> usize {
+        self.axes.iter().map(AxisDef::cells).product()
+    }
+
+    /// The grid-sample indices of the `2^p` corners of cell `cell` (cells
+    /// row-major over the cell counts, axis 0 fastest; a cyclic axis' last
+    /// cell wraps to sample 0).
+    #[must_use]
+    pub fn corners(&self, cell: usize) -> Vec<usize> {
+        let mut k = Vec::with_capacity(self.axes.len());
+        let mut rest = cell;
+        for a in &self.axes {
+            let n = a.cells().max(1);
+            k.push(rest % n);
+            rest /= n;
+        }
+        (0..1usize << self.axes.len())
+            .map(|bits| {
+                let mut index = 0;
+                let mut stride = 1;
+                for (i, (a, &ki)) in self.axes.iter().zip(&k).enumerate() {
+                    let count = usize::from(a.count);
+                    let j = (ki + (bits >> i & 1)) % count;
+                    index += j * stride;
+                    stride *= count;
+                }
+                index
+            })
+            .collect()
     }
 
     /// Cell centres, row-major over the cell counts, axis 0 fastest.
@@ -590,7 +637,7 @@ pub fn score(
     folds: &[Vec<usize>],
     method: Method,
     probe: Option<(usize, DVec3)>,
-    post: &dyn Fn(&mut Value),
+    post: &dyn Fn(&[f64], &mut Value),
 ) -> Score {
     let mut pos = Vec::new();
     let mut rot = Vec::new();
@@ -609,7 +656,7 @@ pub fn score(
         for &t in fold {
             let w = fitted.weights(&space.cells(&records[t].params));
             let mut pred = blend(&values, &w);
-            post(&mut pred);
+            post(&records[t].params, &mut pred);
             let e = compare(&pred, &records[t].value, probe);
             pos.push(e.mean_position);
             rot.push(e.mean_rotation);
@@ -647,6 +694,26 @@ pub fn median(v: &mut [f64]) -> Option<f64> {
     })
 }
 
+/// The validity of every cell (see the module doc): its centre, or each
+/// of its corners, within `radius` cells of an example (distances compared
+/// with a relative tolerance of 1e-9, so a distance equal to the radius in
+/// exact arithmetic counts as within it).
+#[must_use]
+pub fn valid_cells(space: &Space, centres: &[Vec<f64>], radius: f64) -> Vec<bool> {
+    let r2 = radius * radius * (1.0 + 1e-9);
+    let near = |x: &Vec<f64>| centres.iter().any(|e| space.dist2(x, e) <= r2);
+    let corner_near: Vec<bool> = space.grid_points().iter().map(near).collect();
+    space
+        .cell_centres()
+        .iter()
+        .enumerate()
+        .map(|(c, centre)| {
+            let corners = space.corners(c);
+            corners.iter().all(|&i| corner_near[i]) || near(centre)
+        })
+        .collect()
+}
+
 /// Resampled grid: one value per grid sample, and the cell mask.
 #[derive(Debug, Clone)]
 pub struct Resampled {
@@ -665,7 +732,7 @@ pub fn grid(
     records: &[Record],
     method: Method,
     radius: f64,
-    post: &dyn Fn(&mut Value),
+    post: &dyn Fn(&[f64], &mut Value),
     tick: &dyn Fn(),
 ) -> Resampled {
     let centres: Vec<Vec<f64>> = records.iter().map(|r| space.cells(&r.params)).collect();
@@ -684,7 +751,7 @@ pub fn grid(
                 .collect();
             let v = if hits.is_empty() {
                 let mut v = blend(&values, &fitted.weights(g));
-                post(&mut v);
+                post(&space.params(g), &mut v);
                 v
             } else {
                 exact += 1;
@@ -696,12 +763,7 @@ pub fn grid(
             v
         })
         .collect();
-    let r2 = radius * radius;
-    let valid = space
-        .cell_centres()
-        .iter()
-        .map(|c| centres.iter().any(|e| space.dist2(c, e) <= r2))
-        .collect();
+    let valid = valid_cells(space, &centres, radius);
     Resampled {
         values: out,
         valid,
@@ -812,8 +874,38 @@ mod tests {
             value: scalar(0.0),
             group: 0,
         }];
-        let r = grid(&space, &records, Method::Idw { k: 1 }, 0.5, &|_| {}, &|| {});
+        let r = grid(
+            &space,
+            &records,
+            Method::Idw { k: 1 },
+            0.5,
+            &|_, _| {},
+            &|| {},
+        );
         assert_eq!(r.valid, [true, false, false]);
         assert_eq!(r.values.len(), 4);
+        // Examples on both corners of the last cell validate it even with a
+        // radius far below the centre's distance of 0.5.
+        let on = |x: f64| Record {
+            params: vec![x],
+            value: scalar(x),
+            group: 0,
+        };
+        let r = grid(
+            &space,
+            &[on(2.0), on(3.0)],
+            Method::Idw { k: 1 },
+            0.1,
+            &|_, _| {},
+            &|| {},
+        );
+        assert_eq!(r.valid, [false, false, true]);
+        assert_eq!(r.exact, 2);
+        // Corners of a 2-D cell, one cyclic axis wrapping to sample 0.
+        let mut cyc = axis(3);
+        cyc.cyclic = true;
+        let s2 = Space::new(&[axis(3), cyc]);
+        assert_eq!(s2.cell_count(), 6);
+        assert_eq!(s2.corners(5), [7, 8, 1, 2]);
     }
 }

@@ -46,12 +46,17 @@ use glam::{Quat, Vec3};
 use marionette_core::pose::{self, Hierarchy, LocalPose, NO_PARENT, Pose};
 
 use super::error::{InputError, Source};
-use super::spec::RigSpec;
+use super::spec::{NameMap, RigSpec};
 use crate::import::CoreSkeleton;
 use crate::rigfile::RigFile;
+use marionette_core::table::NAME_LEN;
 
 /// Segment capacity of the poses used while building (the blob's limit).
 pub const CAP: usize = 256;
+
+/// The most segments a rig made from a skeleton may have (the core's pose
+/// capacity, which the solver and the board work within).
+pub const MAX_RIG_SEGMENTS: usize = marionette_core::pose::MAX_SEGMENTS;
 
 /// A rig: names, topology, offsets, and the mocap segment each follows.
 #[derive(Debug, Clone)]
@@ -83,29 +88,56 @@ impl Rig {
         spec: &RigSpec,
         src: &Source,
     ) -> Result<Self, InputError> {
+        let map = &spec.names;
+        // Kept joints (the root always), parents first as in the skeleton.
+        let kept: Vec<usize> = (0..sk.len())
+            .filter(|&i| i == 0 || map.keeps(&sk.names[i]))
+            .collect();
+        let mut index = vec![None; sk.len()];
+        for (k, &i) in kept.iter().enumerate() {
+            index[i] = Some(k);
+        }
+        let names: Vec<String> = kept
+            .iter()
+            .map(|&i| map.segment_name(&sk.names[i]))
+            .collect();
+        check_names(&names, map, src)?;
         for name in spec.lengths.keys() {
-            if sk.index_of(name).is_none() {
+            if !names.contains(name) {
                 let field = format!("rig.lengths.{name}");
                 return Err(src.error_line(
                     spec.line,
                     &field,
-                    format!("no segment {name:?} in the skeleton"),
+                    format!("no segment {name:?} in the rig"),
                 ));
             }
         }
         let scale = spec.scale as f32;
-        let offsets = sk
-            .names
-            .iter()
-            .zip(&sk.offsets)
-            .map(|(n, &o)| o * scale * spec.lengths.get(n).map_or(1.0, |&f| f as f32))
-            .collect();
+        let mut parents = Vec::with_capacity(kept.len());
+        let mut offsets = Vec::with_capacity(kept.len());
+        for (&i, name) in kept.iter().zip(&names) {
+            // Up to the nearest kept ancestor, summing the rest offsets of
+            // the dropped joints between (rest rotations are zero).
+            let (mut offset, mut at) = (sk.offsets[i], usize::from(sk.parents[i]));
+            let parent = loop {
+                match (at, index.get(at).copied().flatten()) {
+                    (_, Some(k)) => break u8::try_from(k).unwrap_or(NO_PARENT),
+                    (a, None) if a < sk.len() => {
+                        offset += sk.offsets[a];
+                        at = usize::from(sk.parents[a]);
+                    }
+                    _ => break NO_PARENT,
+                }
+            };
+            parents.push(if i == 0 { NO_PARENT } else { parent });
+            offsets.push(offset * scale * spec.lengths.get(name).map_or(1.0, |&f| f as f32));
+        }
         let mut rig = Self {
-            names: sk.names.clone(),
-            parents: sk.parents.clone(),
+            names,
+            parents,
             offsets,
-            source: (0..sk.len()).map(Some).collect(),
-            rotation_offsets: vec![Quat::IDENTITY; sk.len()],
+            source: kept.iter().map(|&i| Some(i)).collect(),
+            rotation_offsets: vec![Quat::IDENTITY; kept.len()],
             root_scale: scale,
             hash: 0,
             file: None,
@@ -287,6 +319,50 @@ impl Rig {
     }
 }
 
+/// The segment names a table can hold: at most [`MAX_RIG_SEGMENTS`], each at
+/// most 24 bytes without NUL, no two alike. Errors name the `[rig]` field
+/// that shapes them.
+fn check_names(names: &[String], map: &NameMap, src: &Source) -> Result<(), InputError> {
+    let [strip, rename, drop, _] = map.lines;
+    if names.len() > MAX_RIG_SEGMENTS {
+        return Err(src.error_line(
+            drop,
+            "rig.drop",
+            format!(
+                "the skeleton gives {} segments; a table holds at most {MAX_RIG_SEGMENTS}: drop joints (`drop = [\"*Twist*\", ...]` or `keep = [...]`)",
+                names.len()
+            ),
+        ));
+    }
+    if let Some(long) = names
+        .iter()
+        .find(|n| n.len() > NAME_LEN || n.contains('\0'))
+    {
+        let (line, field) = if map.strip_prefix.is_none() {
+            (strip, "rig.strip_prefix")
+        } else {
+            (rename, "rig.rename")
+        };
+        return Err(src.error_line(
+            line,
+            field,
+            format!(
+                "segment name {long:?} is longer than {NAME_LEN} bytes: strip a prefix or rename it"
+            ),
+        ));
+    }
+    for (k, n) in names.iter().enumerate() {
+        if names[..k].contains(n) {
+            return Err(src.error_line(
+                rename,
+                "rig.rename",
+                format!("two segments are named {n:?}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Rest-pose alignment (`[rig] align_rest`): for each non-root rig segment
 /// with a mocap joint, the shortest-arc rotation taking the rig's rest bone
 /// direction onto the mocap's (all rotations zero). The bone runs to the
@@ -404,6 +480,7 @@ mod tests {
                 retarget: None,
                 scale: 0.5,
                 lengths,
+                names: NameMap::default(),
                 line: 3,
             },
             &src,
@@ -436,10 +513,28 @@ mod tests {
             retarget: None,
             scale: 1.0,
             lengths: [("elbow".to_owned(), 1.0)].into(),
+            names: NameMap::default(),
             line: 3,
         };
         let e = Rig::from_skeleton(&sk, &bad, &src).unwrap_err();
         assert_eq!((e.line, e.field.as_str()), (3, "rig.lengths.elbow"));
+        // Dropping `upper` hangs `lower` from the root at the summed offset
+        // (by hand: 0.3 + 0.25 m down), renamed; it still follows the
+        // mocap's `lower` joint.
+        let pruned = RigSpec {
+            lengths: BTreeMap::new(),
+            names: NameMap {
+                drop: vec!["up*".into()],
+                rename: [("lower".to_owned(), "forearm".to_owned())].into(),
+                ..NameMap::default()
+            },
+            ..bad
+        };
+        let rig = Rig::from_skeleton(&sk, &pruned, &src).unwrap();
+        assert_eq!(rig.names, ["root", "forearm"]);
+        assert_eq!(rig.parents, [NO_PARENT, 0]);
+        assert!((rig.offsets[1] - Vec3::new(0.0, -0.55, 0.0)).length() < 1e-6);
+        assert_eq!(rig.source, [Some(0), Some(2)]);
     }
 }
 

@@ -21,6 +21,9 @@
 //! # frames = [[0, 200]]    # grid: inclusive frame ranges (default: all)
 //! # cut = [10, 130]        # clips: phase boundaries, first to last frame
 //! # params = [1.7]         # explicit parameters (else measured, see [[axis]])
+//! # fps = 60               # this clip's frame rate (overrides [mocap] fps and the
+//!                          # file's header; a rate that makes the root's speed
+//!                          # implausible is warned about, see `mocap`)
 //!
 //! [rig]                     # retarget: see `retarget`
 //! # file = "../../rigs/cmu31.toml"  # a rig file (relative to the spec, or a name in rigs/)
@@ -29,6 +32,10 @@
 //! #                         # (default: its [[retarget.joint]] map)
 //! scale = 1.0               # without a file: uniform scale of every offset and the root path
 //! lengths = { rradius = 1.0 } # without a file: per-segment factor on the offset to the parent
+//! # strip_prefix = "CC_Base_" # without a file: joint names lose this prefix
+//! # rename = { Hip = "hips" }  # without a file: (stripped) joint name -> segment name
+//! # drop = ["*Twist*"]      # without a file: joints left out (globs, `*` = anything);
+//! # keep = ["*Thigh", ...]  # if given, only matching joints are kept (the root always)
 //!
 //! [[axis]]
 //! name = "hand_x"
@@ -49,8 +56,13 @@
 //!
 //! [resample]
 //! method = "auto"           # auto | idw | rbf | local-linear
-//! # valid_radius = 0.87     # cells; default √p / 2
+//! # valid_radius = 0.87     # cells; a cell is valid when its centre, or each of
+//!                           # its corners, is this close to an example (default √p / 2;
+//!                           # a cell whose corners are all examples is always valid)
 //! # enforce_lengths = true  # W&H limb-length enforcement of each resampled pose
+//! # place_probe = true      # grid of one point's x, y, z (the hand): solve each
+//!                           # resampled pose so the point sits on its grid point
+//!                           # (see `place`); poses the rig cannot fit stay as resampled
 //! ```
 //!
 //! `frame = "stand"` is for a figure whose root is held by a stand (a
@@ -166,6 +178,8 @@ pub struct ClipSpec {
     pub cut: Vec<usize>,
     /// Explicit parameters.
     pub params: Option<Vec<f64>>,
+    /// This clip's frame rate (overrides `[mocap] fps` and the header).
+    pub fps: Option<f64>,
     /// Line of the clip's `file` key (for errors found while loading).
     pub line: usize,
 }
@@ -238,8 +252,86 @@ pub struct RigSpec {
     pub scale: f64,
     /// Per-segment offset factors.
     pub lengths: BTreeMap<String, f64>,
+    /// Which skeleton joints become segments and their names (a rig from
+    /// the skeleton only).
+    pub names: NameMap,
     /// Line of the `[rig]` table.
     pub line: usize,
+}
+
+/// Selecting and naming a skeleton's joints (`[rig] strip_prefix`,
+/// `rename`, `drop`, `keep`). Patterns are globs (`*` matches any run of
+/// characters) on the name after `strip_prefix`; `rename` keys are such
+/// names too. A joint is kept when it matches some `keep` pattern (or there
+/// is none) and no `drop` pattern; the root is always kept.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct NameMap {
+    /// Removed from the start of every joint name that has it.
+    pub strip_prefix: Option<String>,
+    /// Stripped name → segment name.
+    pub rename: BTreeMap<String, String>,
+    /// Joints to drop.
+    pub drop: Vec<String>,
+    /// Joints to keep (empty: all).
+    pub keep: Vec<String>,
+    /// Lines of the fields, for errors: `strip_prefix`, `rename`, `drop`, `keep`.
+    pub lines: [usize; 4],
+}
+
+impl NameMap {
+    /// The name after `strip_prefix`.
+    #[must_use]
+    pub fn stripped<'a>(&self, name: &'a str) -> &'a str {
+        self.strip_prefix
+            .as_deref()
+            .and_then(|p| name.strip_prefix(p))
+            .unwrap_or(name)
+    }
+
+    /// The segment name of joint `name`.
+    #[must_use]
+    pub fn segment_name(&self, name: &str) -> String {
+        let s = self.stripped(name);
+        self.rename.get(s).cloned().unwrap_or_else(|| s.to_owned())
+    }
+
+    /// Whether joint `name` becomes a segment (the root always does).
+    #[must_use]
+    pub fn keeps(&self, name: &str) -> bool {
+        let s = self.stripped(name);
+        (self.keep.is_empty() || self.keep.iter().any(|p| glob(p, s)))
+            && !self.drop.iter().any(|p| glob(p, s))
+    }
+
+    /// Whether any selection or naming is asked for.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.strip_prefix.is_none()
+            && self.rename.is_empty()
+            && self.drop.is_empty()
+            && self.keep.is_empty()
+    }
+}
+
+/// Whether `name` matches `pattern`, where `*` matches any run of characters.
+#[must_use]
+pub fn glob(pattern: &str, name: &str) -> bool {
+    let mut parts = pattern.split('*');
+    let first = parts.next().unwrap_or("");
+    let Some(mut rest) = name.strip_prefix(first) else {
+        return false;
+    };
+    let parts: Vec<&str> = parts.collect();
+    let Some((last, middle)) = parts.split_last() else {
+        return rest.is_empty();
+    };
+    for part in middle {
+        match rest.find(part) {
+            Some(at) => rest = &rest[at + part.len()..],
+            None => return false,
+        }
+    }
+    rest.len() >= last.len() && rest.ends_with(last)
 }
 
 /// Motion-table settings.
@@ -262,6 +354,8 @@ pub struct ResampleSpec {
     pub valid_radius: Option<f64>,
     /// Limb-length enforcement of resampled poses.
     pub enforce_lengths: bool,
+    /// Solve each resampled pose of a probe-position grid onto its grid point.
+    pub place_probe: bool,
 }
 
 #[derive(Deserialize)]
@@ -299,6 +393,7 @@ struct RawClip {
     every: Option<Spanned<usize>>,
     cut: Option<Spanned<Vec<usize>>>,
     params: Option<Spanned<Vec<f64>>>,
+    fps: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -327,6 +422,11 @@ struct RawRig {
     scale: Option<Spanned<f64>>,
     #[serde(default)]
     lengths: BTreeMap<String, Spanned<f64>>,
+    strip_prefix: Option<Spanned<String>>,
+    #[serde(default)]
+    rename: BTreeMap<String, Spanned<String>>,
+    drop: Option<Spanned<Vec<String>>>,
+    keep: Option<Spanned<Vec<String>>>,
 }
 
 #[derive(Deserialize)]
@@ -343,6 +443,7 @@ struct RawResample {
     method: Option<Spanned<String>>,
     valid_radius: Option<Spanned<f64>>,
     enforce_lengths: Option<bool>,
+    place_probe: Option<bool>,
 }
 
 /// Reads and checks a spec file.
@@ -614,9 +715,16 @@ impl Parser<'_> {
             || r.file.get_ref().clone(),
             |s| s.to_string_lossy().into_owned(),
         );
+        let fps = match &r.fps {
+            Some(f) if !(f.get_ref().is_finite() && *f.get_ref() > 0.0) => {
+                return self.err(f.span(), &field("fps"), "must be a finite number > 0");
+            }
+            f => f.as_ref().map(|f| *f.get_ref()),
+        };
         Ok(ClipSpec {
             file,
             name,
+            fps,
             frames: r.frames.as_ref().map(|f| f.get_ref().clone()),
             every: self.step(r.every.as_ref(), &field("every"))?,
             cut,
@@ -792,6 +900,7 @@ impl Parser<'_> {
                 retarget: None,
                 scale: 1.0,
                 lengths: BTreeMap::new(),
+                names: NameMap::default(),
                 line: 0,
             });
         };
@@ -860,13 +969,56 @@ impl Parser<'_> {
             .file
             .as_ref()
             .map_or_else(|| self.line(&r.span()), |f| self.line(&f.span()));
+        let names = self.names(g, line)?;
+        if let (Some(_), false) = (&file, names.is_empty()) {
+            return self.err(
+                r.span(),
+                "rig.strip_prefix",
+                "`strip_prefix`, `rename`, `drop` and `keep` shape a rig made from the skeleton; a rig file maps names with its [[retarget.map]]",
+            );
+        }
         Ok(RigSpec {
+            names,
             align_rest: g.align_rest.as_ref().is_some_and(|a| *a.get_ref()),
             retarget,
             file,
             scale,
             lengths,
             line,
+        })
+    }
+
+    fn names(&self, g: &RawRig, line: usize) -> Result<NameMap, InputError> {
+        let at = |span: Option<std::ops::Range<usize>>| span.map_or(line, |s| self.line(&s));
+        for (k, v) in &g.rename {
+            if v.get_ref().is_empty() {
+                return self.err(v.span(), &format!("rig.rename.{k}"), "must not be empty");
+            }
+        }
+        let rename_line = g.rename.values().next().map(Spanned::span);
+        Ok(NameMap {
+            strip_prefix: g.strip_prefix.as_ref().map(|p| p.get_ref().clone()),
+            rename: g
+                .rename
+                .iter()
+                .map(|(k, v)| (k.clone(), v.get_ref().clone()))
+                .collect(),
+            drop: g
+                .drop
+                .as_ref()
+                .map(|d| d.get_ref().clone())
+                .unwrap_or_default(),
+            keep: g
+                .keep
+                .as_ref()
+                .map(|d| d.get_ref().clone())
+                .unwrap_or_default(),
+            lines: [
+                at(g.strip_prefix.as_ref().map(Spanned::span)),
+                at(rename_line),
+                at(g.drop.as_ref().map(Spanned::span)),
+                at(g.keep.as_ref().map(Spanned::span)),
+            ],
         })
     }
 
@@ -948,6 +1100,7 @@ impl Parser<'_> {
             method,
             valid_radius,
             enforce_lengths: g.and_then(|g| g.enforce_lengths).unwrap_or(true),
+            place_probe: g.and_then(|g| g.place_probe).unwrap_or(true),
         })
     }
 }
@@ -1049,5 +1202,28 @@ count = 4
         assert!(e.problem.contains("evry"), "{e}");
         let e = parse_text(&GOOD.replace("kind = \"grid\"", "kind = \"table\"")).unwrap_err();
         assert_eq!((e.line, e.field.as_str()), (1, "kind"));
+    }
+
+    #[test]
+    fn glob_matches_runs_of_characters() {
+        for (p, n) in [
+            ("*", ""),
+            ("*Twist*", "L_ThighTwist01"),
+            ("L_*", "L_Hand"),
+            ("*Toe1", "L_BigToe1"),
+            ("Head", "Head"),
+            ("a*b*c", "abxbc"),
+        ] {
+            assert!(glob(p, n), "{p} {n}");
+        }
+        for (p, n) in [
+            ("Head", "Heads"),
+            ("*Toe1", "L_ToeBase"),
+            ("L_*", "R_Hand"),
+            ("a*b*c", "acb"),
+            ("ab*ba", "aba"),
+        ] {
+            assert!(!glob(p, n), "{p} {n}");
+        }
     }
 }

@@ -124,6 +124,9 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     if args.output.is_some() {
         capacity::check_dataset(&spec, &data, board.as_ref())?;
     }
+    for w in &data.warnings {
+        eprintln!("warning: {w}");
+    }
     if let Some(path) = &args.examples_out {
         write_examples(&data, path, &inputs)?;
     }
@@ -156,11 +159,15 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         progress.finish();
         if args.json {
             report.insert("holdout".into(), serde_json::to_value(&rows)?);
+            report.insert("holdout_pooled".into(), pooled_json(&rows));
         } else {
             print!("{}", holdout_text(&rows));
         }
     }
     if args.json {
+        if !data.warnings.is_empty() {
+            report.insert("warnings".into(), json!(data.warnings));
+        }
         println!("{}", serde_json::to_string_pretty(&report)?);
     }
     Ok(())
@@ -335,6 +342,13 @@ fn build_text(
         r.cells,
         r.exact
     );
+    if let Some(tried) = r.place_tried {
+        let _ = writeln!(
+            s,
+            "  probe placed: {} of {} resampled grid poses solved so the probe sits on its grid point (the rest stay as resampled: beyond the rig's reach)",
+            r.placed, tried
+        );
+    }
     let per_sample = marionette_core::table::SAMPLE_LEN;
     let _ = writeln!(
         s,
@@ -401,6 +415,7 @@ fn build_json(b: &Built, data: &Dataset, out: &std::path::Path, total: f64) -> s
         "cells": r.cells,
         "valid_cells": r.valid_cells,
         "exact_samples": r.exact,
+        "placed_samples": r.placed,
         "sample_bytes": marionette_core::table::SAMPLE_LEN,
         "quantization": r.quant,
         "reconstruction": r.reconstruction,
@@ -408,6 +423,44 @@ fn build_json(b: &Built, data: &Dataset, out: &std::path::Path, total: f64) -> s
             "import": r.seconds[0], "cross_validation": r.seconds[1],
             "resampling": r.seconds[2], "writing": r.seconds[3], "total": total,
         },
+    })
+}
+
+/// Every held-out example of every row, pooled: the table's and the
+/// nearest example's hand median and per-joint mean.
+struct Pooled {
+    examples: usize,
+    hand: Option<f64>,
+    joint: f64,
+    nearest_hand: Option<f64>,
+    nearest_joint: f64,
+}
+
+fn pooled(rows: &[measure::Holdout]) -> Pooled {
+    let pool = |f: &dyn Fn(&measure::Holdout) -> &Vec<f64>| -> Vec<f64> {
+        rows.iter().flat_map(|r| f(r).iter().copied()).collect()
+    };
+    let (mut tp, tj) = (pool(&|r| &r.probe_errors), pool(&|r| &r.joint_errors));
+    let (mut np, nj) = (
+        pool(&|r| &r.nearest.probe_errors),
+        pool(&|r| &r.nearest.joint_errors),
+    );
+    Pooled {
+        examples: tj.len(),
+        hand: build::resample::median(&mut tp),
+        joint: build::resample::mean(&tj),
+        nearest_hand: build::resample::median(&mut np),
+        nearest_joint: build::resample::mean(&nj),
+    }
+}
+
+fn pooled_json(rows: &[measure::Holdout]) -> serde_json::Value {
+    let p = pooled(rows);
+    json!({
+        "examples": p.examples,
+        "median_probe_m": p.hand,
+        "mean_joint_m": p.joint,
+        "nearest": {"median_probe_m": p.nearest_hand, "mean_joint_m": p.nearest_joint},
     })
 }
 
@@ -419,8 +472,16 @@ fn holdout_text(rows: &[measure::Holdout]) -> String {
     );
     let _ = writeln!(
         s,
-        "  {:<40} {:>5} {:>11} {:>11} {:>11} {:>11} {:>5}  method",
-        "clip", "n", "hand med", "joint mean", "solved hand", "solved jnt", "proj"
+        "  {:<40} {:>5} {:>11} {:>11} {:>11} {:>11} {:>11} {:>11} {:>5}  method",
+        "clip",
+        "n",
+        "hand med",
+        "joint mean",
+        "solved hand",
+        "solved jnt",
+        "near hand",
+        "near jnt",
+        "proj"
     );
     let opt = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), mm);
     let mut all_probe = Vec::new();
@@ -429,13 +490,15 @@ fn holdout_text(rows: &[measure::Holdout]) -> String {
     for r in rows {
         let _ = writeln!(
             s,
-            "  {:<40} {:>5} {:>11} {:>11} {:>11} {:>11} {:>5}  {}",
+            "  {:<40} {:>5} {:>11} {:>11} {:>11} {:>11} {:>11} {:>11} {:>5}  {}",
             r.clip,
             r.examples,
             opt(r.median_probe),
             mm(r.mean_joint),
             opt(r.solved.map(|x| x.median_probe)),
             opt(r.solved.map(|x| x.mean_joint)),
+            opt(r.nearest.median_probe),
+            mm(r.nearest.mean_joint),
             r.projected,
             r.method
         );
@@ -447,6 +510,17 @@ fn holdout_text(rows: &[measure::Holdout]) -> String {
         all_solved.extend(r.solved.map(|x| x.mean_joint));
     }
     if rows.len() > 1 {
+        let p = pooled(rows);
+        let _ = writeln!(
+            s,
+            "  all {} held-out examples: table hand median {}, per-joint mean {}; nearest example hand median {}, per-joint mean {} (table {:+.1} %)",
+            p.examples,
+            opt(p.hand),
+            mm(p.joint),
+            opt(p.nearest_hand),
+            mm(p.nearest_joint),
+            100.0 * (p.joint / p.nearest_joint - 1.0),
+        );
         let mean = |v: &[f64]| (!v.is_empty()).then(|| build::resample::mean(v));
         let _ = writeln!(
             s,

@@ -20,7 +20,8 @@
 //!   freedom within their limits (the warm start); only the root's position
 //!   and every listed segment's rotation count (the other positions follow
 //!   from the skeleton), and an unlisted segment keeps its rest relation to
-//!   its parent.
+//!   its parent. Other keys of the pose are ignored, so the output of
+//!   `marionette synth --json` is a start as it is; the segments are checked.
 //! - `goals`: each pulls a point of `segment` (its touch point, or `point` in
 //!   the segment's frame, m) towards `target` (world, m) with `weight` (≥ 0;
 //!   0 = inactive).
@@ -585,7 +586,11 @@ impl<'t> Doc<'t> {
     /// The warm start from a world pose (see the module doc).
     fn start_pose(&self, rig: &Rig<'_>, v: &Value) -> Result<Angles<MAX_SEGMENTS>, GoalsError> {
         let body = rig.body();
-        let o = self.object(v, "start", &["segments"])?;
+        // Other keys (`synth --json`'s `duration`, `travel`, ...) are
+        // ignored, so a synthesized pose is a start as it is.
+        let o = v.as_object().ok_or_else(|| {
+            self.field("start", format!("expected \"rest\" or a pose, found {v}"))
+        })?;
         let list = o.get("segments").and_then(Value::as_array).ok_or_else(|| {
             self.field(
                 "start.segments",

@@ -5,7 +5,12 @@
 //! `{"segments":[{"name","position":[x,y,z],"rotation":[w,x,y,z]}],"duration":s|null}`
 //! — positions in metres, rotations unit quaternions `[w, x, y, z]`;
 //! `duration` is the interpolated motion's total duration in seconds for a
-//! clip table, null for a grid. When the parameters were clamped to the axes
+//! clip table, null for a grid. A looping clip table adds `"travel":[x,y,z]`,
+//! the root's displacement per cycle in metres (the clip frame: y up, z the
+//! direction of travel). `clamped` is true when the parameters were clamped
+//! to the axes, or the phase to a one-shot motion's `[0, phases]`;
+//! `projected` when they fell in an invalid cell and were projected onto the
+//! data. When the parameters were clamped to the axes
 //! or projected out of an invalid cell, a note goes to stderr.
 
 use std::fmt::Write as _;
@@ -81,7 +86,16 @@ pub fn to_json(table: &Table<'_>, s: &Synth) -> serde_json::Value {
             })
         })
         .collect();
-    json!({ "segments": segments, "duration": s.duration.map(short) })
+    let mut out = json!({
+        "segments": segments,
+        "duration": s.duration.map(short),
+        "clamped": s.adjust == Adjust::Clamped,
+        "projected": s.adjust == Adjust::Projected,
+    });
+    if let (Some(t), Some(map)) = (s.travel, out.as_object_mut()) {
+        map.insert("travel".into(), json!(t.map(short)));
+    }
+    out
 }
 
 fn text(table: &Table<'_>, s: &Synth) -> String {
@@ -108,6 +122,9 @@ fn text(table: &Table<'_>, s: &Synth) -> String {
     if let Some(d) = s.duration {
         let per: Vec<String> = s.durations.iter().map(|d| format!("{d:.3}")).collect();
         let _ = writeln!(out, "duration: {d:.3} s (phases: {} s)", per.join(", "));
+    }
+    if let Some([x, y, z]) = s.travel {
+        let _ = writeln!(out, "travel per cycle: {x:.4} {y:.4} {z:.4} m");
     }
     out
 }

@@ -3,7 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::grid;
+use crate::grid::{self, InvalidAxis};
+pub use crate::grid::{Interp, Wrap};
 
 /// Bytes of a fixed-size name (axis or segment): UTF-8, padded with zero bytes.
 pub const NAME_LEN: usize = 24;
@@ -14,28 +15,6 @@ pub const MAX_AXES: usize = 6;
 
 /// Most segments a table may have.
 pub const MAX_SEGMENTS: usize = 256;
-
-/// How an axis treats coordinates beyond its samples.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub enum Wrap {
-    /// Samples cover `[min, min + (count − 1)·step]`; outside is clamped.
-    Bounded,
-    /// The axis repeats with this period; `count · step == period`, and the
-    /// sample after the last is the first.
-    Cyclic {
-        /// Length of one period, in axis units.
-        period: f32,
-    },
-}
-
-/// How to interpolate between samples along an axis.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Interp {
-    /// Lerp positions and slerp rotations between the two neighbours.
-    Linear,
-    /// Catmull-Rom over a window of four samples.
-    CatmullRom,
-}
 
 /// One regular grid axis as stored in the header.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -70,49 +49,25 @@ impl Axis {
     pub fn name(&self) -> Option<&str> {
         name_str(&self.name)
     }
+}
 
-    /// Whether the stored values describe a usable axis, by the same rule as
-    /// [`crate::grid::Grid::new`]: `count ≥ 2`, finite `min`, finite
-    /// `step > 0`, and for a cyclic axis `period = count · step` to 1e-5
-    /// relative.
-    #[must_use]
-    pub fn is_valid(&self) -> bool {
-        let ok =
-            self.count >= 2 && self.min.is_finite() && self.step.is_finite() && self.step > 0.0;
-        let period_ok = match self.wrap {
-            Wrap::Bounded => true,
-            Wrap::Cyclic { period } => {
-                let expect = f32::from(self.count) * self.step;
-                crate::math::abs(period - expect) <= 1e-5 * expect
-            }
+impl TryFrom<&Axis> for grid::Axis {
+    type Error = InvalidAxis;
+
+    /// The axis as the synthesis grid takes it, checked by the grid's rule
+    /// ([`grid::Axis::is_valid`]).
+    fn try_from(a: &Axis) -> Result<Self, InvalidAxis> {
+        let axis = grid::Axis {
+            min: a.min,
+            step: a.step,
+            count: u32::from(a.count),
+            wrap: a.wrap,
+            interp: a.interp,
         };
-        ok && period_ok
-    }
-
-    /// Number of cells: `count − 1` bounded, `count` cyclic.
-    #[must_use]
-    pub fn cells(&self) -> usize {
-        match self.wrap {
-            Wrap::Bounded => usize::from(self.count).saturating_sub(1),
-            Wrap::Cyclic { .. } => usize::from(self.count),
-        }
-    }
-
-    /// The axis as the synthesis grid takes it.
-    #[must_use]
-    pub fn to_grid(&self) -> grid::Axis {
-        grid::Axis {
-            min: self.min,
-            step: self.step,
-            count: u32::from(self.count),
-            kind: match self.wrap {
-                Wrap::Bounded => grid::AxisKind::Bounded,
-                Wrap::Cyclic { period } => grid::AxisKind::Cyclic { period },
-            },
-            interp: match self.interp {
-                Interp::Linear => grid::Interp::Linear,
-                Interp::CatmullRom => grid::Interp::CatmullRom,
-            },
+        if axis.is_valid() {
+            Ok(axis)
+        } else {
+            Err(InvalidAxis)
         }
     }
 }
@@ -172,6 +127,49 @@ pub struct Header<'a> {
     pub valid: Span,
     /// Clip durations (`f32` LE, seconds), phase fastest; empty for grids.
     pub durations: Span,
+    /// Looping clip tables: each parameter sample's root displacement over
+    /// one cycle (`3 × f32` LE, metres, the clip frame's x, y, z); empty
+    /// otherwise. Version 2 and later (a version 1 header ends before it).
+    pub travel: Span,
+}
+
+/// The version 1 header: [`Header`] without `travel` (read, never written).
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+pub(super) struct HeaderV1<'a> {
+    total_len: u32,
+    rig_hash: u64,
+    kind: Kind,
+    axis_count: u8,
+    axes: [Axis; MAX_AXES],
+    segment_count: u16,
+    segment_names: &'a [u8],
+    position_scale: f32,
+    position_bound: f32,
+    rotation_bound: f32,
+    samples: Span,
+    valid: Span,
+    durations: Span,
+}
+
+impl<'a> From<HeaderV1<'a>> for Header<'a> {
+    fn from(h: HeaderV1<'a>) -> Self {
+        Header {
+            total_len: h.total_len,
+            rig_hash: h.rig_hash,
+            kind: h.kind,
+            axis_count: h.axis_count,
+            axes: h.axes,
+            segment_count: h.segment_count,
+            segment_names: h.segment_names,
+            position_scale: h.position_scale,
+            position_bound: h.position_bound,
+            rotation_bound: h.rotation_bound,
+            samples: h.samples,
+            valid: h.valid,
+            durations: h.durations,
+            travel: Span::default(),
+        }
+    }
 }
 
 /// A fixed-size name without its zero padding (`None` if not UTF-8).

@@ -16,16 +16,17 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `"MRNT"` (`4D 52 4E 54`) |
-//! | 4 | 2 | format version, `u16` LE ([`VERSION`] = 1) |
+//! | 4 | 2 | format version, `u16` LE ([`VERSION`] = 2; version 1 is read too) |
 //! | 6 | 4 | header length `H`, `u32` LE (≤ [`MAX_HEADER_LEN`]) |
 //! | 10 | `H` | header, postcard ([`Header`], below) |
 //! | 10 + `H` | 0–3 | zero padding to a multiple of 4: the *data start* `D` |
 //! | `samples.offset` | `samples.len` | sample array (below) |
 //! | `valid.offset` | `valid.len` | validity bitmask (below) |
 //! | `durations.offset` | `durations.len` | clip durations, `f32` LE (below) |
+//! | `travel.offset` | `travel.len` | looping clips' root travel per cycle, `f32` LE (below) |
 //! | `total_len − 4` | 4 | CRC-32/ISO-HDLC ([`crate::crc`]) of bytes `0 .. total_len − 4`, `u32` LE |
 //!
-//! The writer places the three arrays in this order right after `D`, each at a
+//! The writer places the four arrays in this order right after `D`, each at a
 //! 4-aligned offset, zero-padded between them. The reader only requires every
 //! array to be 4-aligned and to lie within `D .. total_len − 4`. Bytes after
 //! `total_len` (erased flash `0xFF`, zeros of an emulator's memory region) are
@@ -53,6 +54,10 @@
 //! | 11 | `samples` | [`Span`]: varint `u32` offset, varint `u32` length | the sample array |
 //! | 12 | `valid` | [`Span`] | the validity bitmask |
 //! | 13 | `durations` | [`Span`] | the durations (length 0 for a grid) |
+//! | 14 | `travel` | [`Span`] | the root travel (length 0 but for looping clips); version 2 |
+//!
+//! A version 1 header ends after field 13; it is read with an empty
+//! `travel` (a version 1 loop has no stored travel: zero).
 //!
 //! Each [`Axis`] is: `name` 24 bytes (UTF-8, zero-padded), `min: f32`,
 //! `step: f32`, `count`: varint `u16`, `wrap`: varint 0 = `Bounded` or varint 1
@@ -91,6 +96,14 @@
 //!   sample, phase fastest: `durations.len` must be
 //!   `parameter samples · phases · 4`; 0 for a grid.
 //!
+//! - **Travel** (looping clip tables only, version 2). `f32` LE metres, three
+//!   per parameter sample (x, y, z in the clip frame: y up, z the direction
+//!   of travel), parameter sample order: `travel.len` must be
+//!   `parameter samples · 12` for a clip table whose phase axis is cyclic, 0
+//!   otherwise. The builder removes each loop's net root displacement from
+//!   its poses (so the loop closes in place) and stores it here;
+//!   [`crate::clip::Motion::travel`] interpolates it like the durations.
+//!
 //! # Error bound
 //!
 //! Against the unquantized (normalized) input, each decoded sample is within
@@ -101,9 +114,8 @@
 //! not clip the largest coordinate and refuses coordinates beyond
 //! [`quant::MAX_POSITION`] = 32 m, so the position bound is below 0.5 mm
 //! (0.498 mm at the full 32 m range, 0.031 mm for a 2 m figure). Both bounds
-//! are stored in the header; `tests/table.rs` measures them against an `f64`
-//! reference (max 1.495e-4 rad over 10⁶ random and edge-case rotations;
-//! 0.490 mm at the 32 m range).
+//! are stored in the header; `tests/table.rs` checks them against an `f64`
+//! reference over random and edge-case rotations and at the 32 m range.
 //!
 //! # Size
 //!
@@ -113,15 +125,10 @@
 //! defines no directory of several blobs; the reader ignores what follows
 //! `total_len`, so blobs could be placed back to back at 4-aligned offsets).
 //!
-//! On the emulated Cortex-M4F (QEMU `-icount`, instruction counts, not
-//! cycles) that blob parses in about 267,000 instructions (almost all of it
-//! the CRC) and [`Table::sample`] costs about 95 instructions per segment
-//! sample (three word loads, the three small components as integers to
-//! floats, one range check, `rest · rsqrt(rest)` and one Newton step of
-//! renormalization). The grid reads a segment's whole window before
-//! interpolating ([`Samples::DECODES`]); a fresh query and the 16-segment
-//! pose of a trilinear table cost about 22,000 instructions
-//! (`synth.table16.core` in `marionette icount`).
+//! [`Table::sample`] decodes one segment sample on each call (no cache);
+//! the grid reads a segment's whole window before interpolating
+//! ([`Samples::DECODES`]). Instruction counts are in README's measured
+//! section (`synth.table16.core`, `marionette icount`).
 
 mod header;
 pub mod quant;
@@ -141,8 +148,9 @@ use crate::grid::{self, Grid, GridError, Samples};
 /// The four magic bytes at the start of every blob.
 pub const MAGIC: [u8; 4] = *b"MRNT";
 
-/// The format version this reader understands and the writer writes.
-pub const VERSION: u16 = 1;
+/// The format version the writer writes (the reader also reads version 1,
+/// which has no travel array).
+pub const VERSION: u16 = 2;
 
 /// Bytes before the header: magic, version, header length.
 pub const PREFIX_LEN: usize = 10;
@@ -161,7 +169,7 @@ pub enum TableError {
     Truncated,
     /// The first four bytes are not `"MRNT"`.
     BadMagic,
-    /// The format version is not [`VERSION`].
+    /// The format version is neither 1 nor [`VERSION`].
     BadVersion {
         /// The version found in the blob.
         found: u16,
@@ -192,7 +200,7 @@ impl fmt::Display for TableError {
             Self::Truncated => f.write_str("table blob truncated"),
             Self::BadMagic => f.write_str("not a table blob (bad magic)"),
             Self::BadVersion { found } => {
-                write!(f, "table format version {found} (expected {VERSION})")
+                write!(f, "table format version {found} (expected 1 or {VERSION})")
             }
             Self::BadHeader => f.write_str("malformed table header"),
             Self::BadAxis { index } => write!(f, "table axis {index} is malformed"),
@@ -261,10 +269,10 @@ fn shape(header: &Header<'_>) -> Result<Shape, TableError> {
         param_cells: 1,
     };
     for (i, axis) in axes.iter().enumerate() {
-        if !axis.is_valid() {
-            // `i < MAX_AXES = 6`, so it fits a u8.
-            return Err(TableError::BadAxis { index: i as u8 });
-        }
+        // `i < MAX_AXES = 6`, so it fits a u8.
+        let cells = grid::Axis::try_from(axis)
+            .map_err(|_| TableError::BadAxis { index: i as u8 })?
+            .cells() as usize;
         let count = usize::from(axis.count);
         shape.grid_samples = shape
             .grid_samples
@@ -274,7 +282,7 @@ fn shape(header: &Header<'_>) -> Result<Shape, TableError> {
             shape.param_samples = shape.grid_samples;
             shape.param_cells = shape
                 .param_cells
-                .checked_mul(axis.cells())
+                .checked_mul(cells)
                 .ok_or(TableError::BadBounds)?;
         }
     }
@@ -316,8 +324,9 @@ fn array(
     Ok(bytes)
 }
 
-/// Reads the prefix and decodes the header; returns it with the data start.
-fn read_header(bytes: &[u8]) -> Result<(Header<'_>, usize), TableError> {
+/// Reads the prefix and decodes the header; returns it with the data start
+/// and the format version.
+fn read_header(bytes: &[u8]) -> Result<(Header<'_>, usize, u16), TableError> {
     let Some((&[m0, m1, m2, m3, v0, v1, h0, h1, h2, h3], rest)) =
         bytes.split_first_chunk::<PREFIX_LEN>()
     else {
@@ -327,7 +336,7 @@ fn read_header(bytes: &[u8]) -> Result<(Header<'_>, usize), TableError> {
         return Err(TableError::BadMagic);
     }
     let found = u16::from_le_bytes([v0, v1]);
-    if found != VERSION {
+    if found != 1 && found != VERSION {
         return Err(TableError::BadVersion { found });
     }
     let header_len =
@@ -336,16 +345,23 @@ fn read_header(bytes: &[u8]) -> Result<(Header<'_>, usize), TableError> {
         return Err(TableError::BadBounds);
     }
     let raw = rest.get(..header_len).ok_or(TableError::Truncated)?;
-    let header = match postcard::take_from_bytes::<Header<'_>>(raw) {
-        Ok((header, [])) => header,
-        _ => return Err(TableError::BadHeader),
+    let header = if found == 1 {
+        match postcard::take_from_bytes::<header::HeaderV1<'_>>(raw) {
+            Ok((header, [])) => Header::from(header),
+            _ => return Err(TableError::BadHeader),
+        }
+    } else {
+        match postcard::take_from_bytes::<Header<'_>>(raw) {
+            Ok((header, [])) => header,
+            _ => return Err(TableError::BadHeader),
+        }
     };
     // header_len ≤ MAX_HEADER_LEN, so neither step can overflow; checked anyway.
     let start = PREFIX_LEN
         .checked_add(header_len)
         .and_then(align4)
         .ok_or(TableError::BadBounds)?;
-    Ok((header, start))
+    Ok((header, start, found))
 }
 
 /// Splits off the CRC-checked blob body `[start, total_len − 4)` after
@@ -371,6 +387,7 @@ pub struct Table<'a> {
     samples: &'a [u8],
     valid: &'a [u8],
     durations: &'a [u8],
+    travel: &'a [u8],
     shape: Shape,
 }
 
@@ -384,7 +401,7 @@ impl<'a> Table<'a> {
     /// bounds, alignment and size. Trailing bytes after `total_len` are
     /// ignored. Never panics; all offset arithmetic is checked.
     pub fn parse(bytes: &'a [u8]) -> Result<Self, TableError> {
-        let (header, start) = read_header(bytes)?;
+        let (header, start, version) = read_header(bytes)?;
         let data = checked_data(bytes, header.total_len, start)?;
         check_segments(&header)?;
         let shape = shape(&header)?;
@@ -407,11 +424,27 @@ impl<'a> Table<'a> {
             Some(shape.param_cells.div_ceil(8)),
         )?;
         let durations = array(data, start, header.durations, duration_bytes)?;
+        let looping = matches!(header.kind, Kind::Clips { .. })
+            && header
+                .axes
+                .get(usize::from(header.axis_count).wrapping_sub(1))
+                .is_some_and(|a| matches!(a.wrap, Wrap::Cyclic { .. }));
+        let travel = if version == 1 {
+            &[][..]
+        } else {
+            let expected = if looping {
+                shape.param_samples.checked_mul(12)
+            } else {
+                Some(0)
+            };
+            array(data, start, header.travel, expected)?
+        };
         Ok(Self {
             header,
             samples,
             valid,
             durations,
+            travel,
             shape,
         })
     }
@@ -522,7 +555,7 @@ impl<'a> Table<'a> {
     /// A grid table carries its validity mask; a clip table's mask covers the
     /// parameter cells only, see [`Table::param_grid`].
     pub fn grid(&self) -> Result<Grid<'a>, GridError> {
-        let (axes, n) = grid_axes(self.axes());
+        let (axes, n) = grid_axes(self.axes())?;
         let mask = match self.header.kind {
             Kind::Grid => Some(self.valid),
             Kind::Clips { .. } => None,
@@ -534,7 +567,7 @@ impl<'a> Table<'a> {
     /// grid table, the parameter grid of a clip table (whose clips are
     /// parameter samples; [`GridError::AxisCount`] for a single clip).
     pub fn param_grid(&self) -> Result<Grid<'a>, GridError> {
-        let (axes, n) = grid_axes(self.param_axes());
+        let (axes, n) = grid_axes(self.param_axes())?;
         Grid::new(axes.get(..n).unwrap_or(&[]), Some(self.valid))
     }
 
@@ -609,15 +642,32 @@ impl<'a> Table<'a> {
     }
 }
 
+impl Table<'_> {
+    /// Root displacement over one cycle of the looping clip at parameter
+    /// sample `index`, metres in the clip frame (`None` for other tables, a
+    /// version 1 blob, or out of range).
+    #[must_use]
+    pub fn travel(&self, index: usize) -> Option<Vec3> {
+        let at = index.checked_mul(12)?;
+        let bytes = self.travel.get(at..)?.first_chunk::<12>()?;
+        let [x0, x1, x2, x3, y0, y1, y2, y3, z0, z1, z2, z3] = *bytes;
+        Some(Vec3::new(
+            f32::from_le_bytes([x0, x1, x2, x3]),
+            f32::from_le_bytes([y0, y1, y2, y3]),
+            f32::from_le_bytes([z0, z1, z2, z3]),
+        ))
+    }
+}
+
 /// The grid axes of `axes`, and how many there are.
-fn grid_axes(axes: &[Axis]) -> ([grid::Axis; MAX_AXES], usize) {
+fn grid_axes(axes: &[Axis]) -> Result<([grid::Axis; MAX_AXES], usize), GridError> {
     let mut out = [grid::Axis::linear(0.0, 1.0, 2); MAX_AXES];
     let mut n = 0;
-    for (slot, axis) in out.iter_mut().zip(axes) {
-        *slot = axis.to_grid();
+    for (i, (slot, axis)) in out.iter_mut().zip(axes).enumerate() {
+        *slot = grid::Axis::try_from(axis).map_err(|_| GridError::BadAxis { axis: i as u8 })?;
         n += 1;
     }
-    (out, n)
+    Ok((out, n))
 }
 
 impl Samples for Table<'_> {
@@ -678,6 +728,7 @@ mod tests {
             samples: Span::default(),
             valid: Span::default(),
             durations: Span::default(),
+            travel: Span::default(),
         };
         let mut header = [0; 400];
         let mut len = 0;
@@ -695,6 +746,10 @@ mod tests {
             h.durations = Span {
                 offset: start + 52,
                 len: 8,
+            };
+            h.travel = Span {
+                offset: start + 60,
+                len: 0,
             };
             h.total_len = start + 64;
         }
@@ -723,7 +778,7 @@ mod tests {
     fn prefix_and_alignment() {
         assert_eq!(
             prefix(0x0102_0304),
-            [b'M', b'R', b'N', b'T', 1, 0, 4, 3, 2, 1]
+            [b'M', b'R', b'N', b'T', 2, 0, 4, 3, 2, 1]
         );
         assert_eq!(
             (align4(0), align4(1), align4(4), align4(7)),

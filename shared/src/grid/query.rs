@@ -1,0 +1,528 @@
+//! Locating a query (cell by division, clamping, wrapping, snapping,
+//! projection out of invalid cells) and the [`Query`] it produces: per axis
+//! the window samples, their position weights and the in-cell coordinate.
+//! [`Query::pose`] hands the window to the unrolled trilinear tree
+//! (`trilinear.rs`) or the general tree (`general.rs`).
+
+use glam::{Quat, Vec3};
+
+use super::axis::{Interp, Located, Wrap, axis_param, locate, nearest_in_cell, to_cell_units};
+use super::general::{AxisWeights, Cubic, Plan, cubic_position_weights};
+use super::lanes::WIDE;
+use super::trilinear::Trilinear;
+use super::{Adjust, Axis, Grid, GridError, MAX_AXES, MAX_WINDOW, Samples};
+use crate::math::SlerpWeight;
+use crate::pose::Pose;
+
+/// How one axis of a located query interpolates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Shape {
+    /// Two samples: lerp / slerp.
+    Linear,
+    /// Four samples: Catmull-Rom, with `P−1` / `P2` replaced by linear
+    /// phantoms where the flags say so.
+    Cubic { lo_phantom: bool, hi_phantom: bool },
+}
+
+/// One axis of a located query.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct AxisQuery {
+    /// The window samples along the axis, in window order, as sample-index
+    /// offsets (index along the axis times the axis' sample stride).
+    pub(super) offset: [u32; 4],
+    /// Position weights of those samples.
+    pub(super) weight: [f32; 4],
+    /// Position inside the cell, `[0, 1]`.
+    pub(super) t: f32,
+    pub(super) shape: Shape,
+}
+
+impl AxisQuery {
+    /// The filler of unused axis slots.
+    const UNUSED: Self = Self {
+        offset: [0; 4],
+        weight: [1.0, 0.0, 0.0, 0.0],
+        t: 0.0,
+        shape: Shape::Linear,
+    };
+
+    /// Samples along the axis in the window (2 linear, 4 Catmull-Rom).
+    pub(super) fn width(&self) -> usize {
+        match self.shape {
+            Shape::Linear => 2,
+            Shape::Cubic { .. } => 4,
+        }
+    }
+
+    /// The rotation coefficients (polynomials folded, see [`SlerpWeight`]).
+    pub(super) fn rotation_weights(&self) -> AxisWeights {
+        match self.shape {
+            Shape::Linear => AxisWeights::Linear(SlerpWeight::new(self.t)),
+            Shape::Cubic {
+                lo_phantom,
+                hi_phantom,
+            } => AxisWeights::Cubic(Cubic::new(self.t, lo_phantom, hi_phantom)),
+        }
+    }
+}
+
+/// A located query: per axis, the window samples, their position weights
+/// and the in-cell coordinate (see the module doc). It is small (cheap to
+/// return and copy); [`Query::pose`] derives the coefficients it applies to
+/// every segment once per call.
+#[derive(Clone, Copy, Debug)]
+pub struct Query {
+    axes: [AxisQuery; MAX_AXES],
+    axis_count: usize,
+    params: [f32; MAX_AXES],
+    adjust: Adjust,
+}
+
+/// The window of a query: the indices of its samples (axis 0 fastest) and
+/// their position weights (the tensor product of the axis weights).
+#[derive(Clone, Copy, Debug)]
+pub struct Window {
+    index: [u32; MAX_WINDOW],
+    weight: [f32; MAX_WINDOW],
+    pub(super) len: usize,
+}
+
+impl Window {
+    /// The tensor expansion of `axes` (axis 0 fastest).
+    fn of(axes: &[AxisQuery]) -> Self {
+        let mut w = Window {
+            index: [0; MAX_WINDOW],
+            weight: [0.0; MAX_WINDOW],
+            len: 1,
+        };
+        if let Some(first) = w.weight.first_mut() {
+            *first = 1.0;
+        }
+        for axis in axes {
+            w.expand(axis);
+        }
+        w
+    }
+
+    /// Expands the window by one axis: every existing entry is repeated for
+    /// each of the axis' samples (the new axis varies slowest).
+    fn expand(&mut self, axis: &AxisQuery) {
+        let old = self.len;
+        let width = axis.width();
+        self.len = old.saturating_mul(width).min(MAX_WINDOW);
+        // Fill from the back so the old entries are read before being overwritten.
+        let along = axis.offset.iter().zip(&axis.weight).take(width);
+        for (digit, (&offset, &aw)) in along.enumerate().rev() {
+            for base in (0..old).rev() {
+                let j = digit * old + base;
+                let (bi, bw) = (
+                    self.index.get(base).copied().unwrap_or(0),
+                    self.weight.get(base).copied().unwrap_or(0.0),
+                );
+                if let (Some(wi), Some(ww)) = (self.index.get_mut(j), self.weight.get_mut(j)) {
+                    *wi = bi.wrapping_add(offset);
+                    *ww = bw * aw;
+                }
+            }
+        }
+    }
+
+    /// Sample indices of the window (axis 0 fastest).
+    #[must_use]
+    pub fn indices(&self) -> &[u32] {
+        self.index.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Position weight of each window sample.
+    #[must_use]
+    pub fn weights(&self) -> &[f32] {
+        self.weight.get(..self.len).unwrap_or(&[])
+    }
+}
+
+impl<'a> Grid<'a> {
+    /// Locates `params` (one per axis) and computes the interpolation
+    /// coefficients (see the module doc for the clamping/projection policy).
+    ///
+    /// # Example
+    ///
+    /// A grid over one axis, `a` from 0 to 2 in steps of 1 (three samples,
+    /// two cells): `a = 0.5` lies halfway through the first cell.
+    ///
+    /// ```
+    /// use marionette_core::grid::{Adjust, Axis, Grid};
+    ///
+    /// let grid = Grid::new(&[Axis::linear(0.0, 1.0, 3)], None).unwrap();
+    /// let q = grid.query(&[0.5]).unwrap();
+    /// // The samples it blends, and their weights.
+    /// assert_eq!(q.window().indices(), &[0, 1]);
+    /// assert_eq!(q.window().weights(), &[0.5, 0.5]);
+    /// assert_eq!(q.adjust(), Adjust::None);
+    /// // Outside the axis the parameter is clamped, and the query says so.
+    /// let q = grid.query(&[7.0]).unwrap();
+    /// assert_eq!(q.adjust(), Adjust::Clamped);
+    /// assert_eq!(q.params(), &[2.0]);
+    /// ```
+    pub fn query(&self, params: &[f32]) -> Result<Query, GridError> {
+        let mut q = Query::default();
+        self.query_into(params, &mut q)?;
+        Ok(q)
+    }
+
+    /// [`Grid::query`] into an existing [`Query`] (no copy of the large
+    /// query struct; reuse one across frames on the firmware).
+    pub fn query_into(&self, params: &[f32], q: &mut Query) -> Result<(), GridError> {
+        if params.len() != self.axis_count {
+            return Err(GridError::ParamCount);
+        }
+        let mut u = [0.0f32; MAX_AXES];
+        let mut adjust = Adjust::None;
+        for (i, ((ui, &p), axis)) in u.iter_mut().zip(params).zip(self.axes()).enumerate() {
+            if !p.is_finite() {
+                return Err(GridError::NonFinite { axis: i as u8 });
+            }
+            let (v, clamped) = to_cell_units(axis, self.inv_step.get(i).copied().unwrap_or(1.0), p);
+            if clamped {
+                adjust = Adjust::Clamped;
+            }
+            *ui = v;
+        }
+        let mut loc = [Located { cell: 0, t: 0.0 }; MAX_AXES];
+        for ((l, &ui), axis) in loc.iter_mut().zip(&u).zip(self.axes()) {
+            *l = locate(axis, ui);
+        }
+        if !self.cell_valid(self.cell_index(&loc) as usize) {
+            let (moved, d2) = self.project(&u)?;
+            loc = moved;
+            // On the boundary of a valid cell: not a projection.
+            if d2 > 0.0 {
+                adjust = Adjust::Projected;
+            }
+        }
+        self.build_query(&loc, adjust, q);
+        Ok(())
+    }
+
+    /// Convenience: [`Grid::query`] then [`Query::pose`]; returns the adjustment.
+    ///
+    /// # Example
+    ///
+    /// Synthesizing a pose from a table in memory: one segment sampled at
+    /// `a = 0` (at the origin) and `a = 1` (2 m along X, turned 90° about
+    /// Y); `a = 0.25` blends them a quarter of the way.
+    ///
+    /// ```
+    /// use glam::{Quat, Vec3};
+    /// use marionette_core::grid::{Axis, Grid, SliceSamples};
+    /// use marionette_core::pose::Pose;
+    ///
+    /// let positions = [Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0)];
+    /// let rotations = [Quat::IDENTITY, Quat::from_rotation_y(core::f32::consts::FRAC_PI_2)];
+    /// let samples = SliceSamples::new(1, &positions, &rotations).unwrap();
+    /// let grid = Grid::new(&[Axis::linear(0.0, 1.0, 2)], None).unwrap();
+    ///
+    /// let mut pose = Pose::<4>::new(1).unwrap();
+    /// grid.synthesize(&samples, &[0.25], &mut pose).unwrap();
+    /// assert!(pose.positions[0].abs_diff_eq(Vec3::new(0.5, 0.0, 0.0), 1e-6));
+    /// // A quarter of the turn: 22.5° about Y.
+    /// let (axis, angle) = pose.rotations[0].to_axis_angle();
+    /// assert!(axis.abs_diff_eq(Vec3::Y, 1e-4) && (angle - 22.5f32.to_radians()).abs() < 1e-4);
+    /// ```
+    pub fn synthesize<S: Samples, const N: usize>(
+        &self,
+        samples: &S,
+        params: &[f32],
+        out: &mut Pose<N>,
+    ) -> Result<Adjust, GridError> {
+        let mut q = Query::default();
+        self.query_into(params, &mut q)?;
+        q.pose(samples, out)?;
+        Ok(q.adjust())
+    }
+
+    fn cell_index(&self, loc: &[Located; MAX_AXES]) -> u32 {
+        loc.iter()
+            .zip(&self.cell_stride)
+            .take(self.axis_count)
+            .fold(0u32, |acc, (l, &s)| {
+                acc.wrapping_add(l.cell.wrapping_mul(s))
+            })
+    }
+
+    /// Nearest point of the nearest valid cell to `u` (cell units).
+    fn project(&self, u: &[f32; MAX_AXES]) -> Result<([Located; MAX_AXES], f32), GridError> {
+        let mut best: Option<(f32, u32)> = None;
+        for c in 0..self.cells {
+            if !self.cell_valid(c as usize) {
+                continue;
+            }
+            let mut d2 = 0.0f32;
+            let mut rest = c;
+            for (axis, &ui) in self.axes().iter().zip(u) {
+                let n = axis.cells();
+                let k = rest.checked_rem(n).unwrap_or(0);
+                rest = rest.checked_div(n).unwrap_or(0);
+                let (d, _) = nearest_in_cell(axis, ui, k);
+                d2 += d * d;
+            }
+            if best.is_none_or(|(bd, _)| d2 < bd) {
+                best = Some((d2, c));
+            }
+        }
+        let (d2, c) = best.ok_or(GridError::NoValidCell)?;
+        let mut loc = [Located { cell: 0, t: 0.0 }; MAX_AXES];
+        let mut rest = c;
+        for ((l, axis), &ui) in loc.iter_mut().zip(self.axes()).zip(u) {
+            let n = axis.cells();
+            let k = rest.checked_rem(n).unwrap_or(0);
+            rest = rest.checked_div(n).unwrap_or(0);
+            let (_, t) = nearest_in_cell(axis, ui, k);
+            *l = Located { cell: k, t };
+        }
+        Ok((loc, d2))
+    }
+
+    fn build_query(&self, loc: &[Located; MAX_AXES], adjust: Adjust, q: &mut Query) {
+        q.axis_count = self.axis_count;
+        q.adjust = adjust;
+        for (a, (((axis, l), aq), param)) in self
+            .axes()
+            .iter()
+            .zip(loc)
+            .zip(&mut q.axes)
+            .zip(&mut q.params)
+            .enumerate()
+        {
+            *aq = self.axis_window(a, loc, axis, l);
+            *param = axis_param(axis, l);
+        }
+    }
+
+    /// Window samples along axis `a` (window order, as index offsets),
+    /// their position weights and the interpolation shape.
+    fn axis_window(
+        &self,
+        a: usize,
+        loc: &[Located; MAX_AXES],
+        axis: &Axis,
+        l: &Located,
+    ) -> AxisQuery {
+        let n = axis.count;
+        let k = l.cell;
+        let cyclic = matches!(axis.wrap, Wrap::Cyclic { .. });
+        let next = |i: u32| {
+            if i + 1 >= n {
+                if cyclic { 0 } else { i }
+            } else {
+                i + 1
+            }
+        };
+        let stride = self.sample_stride.get(a).copied().unwrap_or(0);
+        let (idx, weight, shape) = match axis.interp {
+            Interp::Linear => (
+                [k, next(k), 0, 0],
+                [1.0 - l.t, l.t, 0.0, 0.0],
+                Shape::Linear,
+            ),
+            Interp::CatmullRom => {
+                let k1 = next(k);
+                let (has_lo, has_hi) = (cyclic || k > 0, cyclic || k + 2 < n);
+                let lo_ok = has_lo && self.neighbour_valid(a, loc, false);
+                let hi_ok = has_hi && self.neighbour_valid(a, loc, true);
+                let km1 = if lo_ok {
+                    if k == 0 { n - 1 } else { k - 1 }
+                } else {
+                    k
+                };
+                let k2 = if hi_ok { next(k1) } else { k1 };
+                (
+                    [km1, k, k1, k2],
+                    cubic_position_weights(l.t, !lo_ok, !hi_ok),
+                    Shape::Cubic {
+                        lo_phantom: !lo_ok,
+                        hi_phantom: !hi_ok,
+                    },
+                )
+            }
+        };
+        AxisQuery {
+            offset: idx.map(|i| i.wrapping_mul(stride)),
+            weight,
+            t: l.t,
+            shape,
+        }
+    }
+
+    /// Whether the cell next to the located one along axis `a` is valid.
+    fn neighbour_valid(&self, a: usize, loc: &[Located; MAX_AXES], up: bool) -> bool {
+        if self.valid.is_none() {
+            return true;
+        }
+        let mut moved = *loc;
+        let (Some(l), Some(axis)) = (moved.get_mut(a), self.axes().get(a)) else {
+            return false;
+        };
+        let n = axis.cells();
+        l.cell = match (up, l.cell) {
+            (true, c) if c + 1 < n => c + 1,
+            (true, _) => 0,
+            (false, 0) => n.saturating_sub(1),
+            (false, c) => c - 1,
+        };
+        self.cell_valid(self.cell_index(&moved) as usize)
+    }
+}
+
+impl Default for Query {
+    /// An empty query (window of one sample 0, no axes); fill it with
+    /// [`Grid::query_into`].
+    fn default() -> Self {
+        Query {
+            axes: [AxisQuery::UNUSED; MAX_AXES],
+            axis_count: 0,
+            params: [0.0; MAX_AXES],
+            adjust: Adjust::None,
+        }
+    }
+}
+
+impl Query {
+    /// What the query did to its parameters.
+    #[must_use]
+    pub fn adjust(&self) -> Adjust {
+        self.adjust
+    }
+
+    /// The parameters actually used (after clamping, wrapping, projection).
+    #[must_use]
+    pub fn params(&self) -> &[f32] {
+        self.params.get(..self.axis_count).unwrap_or(&[])
+    }
+
+    /// The window: sample indices (axis 0 fastest) and the position weight
+    /// of each (tensor product of the axis weights).
+    #[must_use]
+    pub fn window(&self) -> Window {
+        Window::of(self.used_axes())
+    }
+
+    fn used_axes(&self) -> &[AxisQuery] {
+        self.axes.get(..self.axis_count).unwrap_or(&[])
+    }
+
+    /// Interpolates every segment of the samples into `out` (`out.count` is set
+    /// to the source's segment count).
+    ///
+    /// Three linear axes (the W&H hand grid) take an unrolled 4 + 2 + 1 tree
+    /// of [`SlerpWeight::blend_lanes`] whose result is normalized once
+    /// ([`crate::math::renormalize_lanes`]); other grids reduce the window axis by
+    /// axis with normalized slerps. On targets with SIMD (the host) segments
+    /// are processed in blocks: the window read sample by sample (a run of
+    /// segments at once from [`Samples::row`]), positions weighed 12 floats
+    /// at a time, the slerps of four segments running as [`crate::math::F4`] lanes
+    /// with their coefficients broadcast once ([`SlerpWeight::lanes`]). On
+    /// the Cortex-M (no SIMD) each segment runs on its own
+    /// ([`Query::pose_scalar`] forces that path anywhere). All paths perform
+    /// the same operations in the same order per segment, so they give the
+    /// same bits (tested).
+    pub fn pose<S: Samples, const N: usize>(
+        &self,
+        samples: &S,
+        out: &mut Pose<N>,
+    ) -> Result<(), GridError> {
+        self.pose_on(samples, out, WIDE)
+    }
+
+    /// [`Query::pose`] through the path the Cortex-M takes (one segment at
+    /// a time) on any target, for tests: the same bits as `pose`.
+    pub fn pose_scalar<S: Samples, const N: usize>(
+        &self,
+        samples: &S,
+        out: &mut Pose<N>,
+    ) -> Result<(), GridError> {
+        self.pose_on(samples, out, false)
+    }
+
+    /// [`Query::pose`], in blocks of [`F4`] lanes if `wide`.
+    #[inline(always)]
+    fn pose_on<S: Samples, const N: usize>(
+        &self,
+        samples: &S,
+        out: &mut Pose<N>,
+        wide: bool,
+    ) -> Result<(), GridError> {
+        let n = samples.segment_count();
+        if n > N {
+            return Err(GridError::Capacity);
+        }
+        out.count = n;
+        let positions = out.positions.get_mut(..n).unwrap_or(&mut []);
+        let rotations = out.rotations.get_mut(..n).unwrap_or(&mut []);
+        match self.trilinear() {
+            Some(tree) => tree.pose(samples, (positions, rotations), wide),
+            None => self.general(samples, (positions, rotations), wide),
+        }
+    }
+
+    /// Interpolates one segment (the scalar path the Cortex-M uses for
+    /// every segment). Derives the coefficients on every call: for whole
+    /// poses use [`Query::pose`].
+    pub fn segment<S: Samples>(
+        &self,
+        samples: &S,
+        segment: usize,
+    ) -> Result<(Vec3, Quat), GridError> {
+        match self.trilinear() {
+            Some(tree) => tree.segment(samples, segment),
+            None => {
+                let mut out = (Vec3::ZERO, Quat::IDENTITY);
+                let slots = (
+                    core::slice::from_mut(&mut out.0),
+                    core::slice::from_mut(&mut out.1),
+                );
+                self.plan().scalar_any(samples, segment, slots)?;
+                Ok(out)
+            }
+        }
+    }
+
+    /// The unrolled tree of an all-linear three-axis query.
+    fn trilinear(&self) -> Option<Trilinear> {
+        match self.used_axes() {
+            [x, y, z] if [x, y, z].iter().all(|a| a.shape == Shape::Linear) => {
+                Some(Trilinear::new(x, y, z))
+            }
+            _ => None,
+        }
+    }
+
+    /// [`Query::pose`] through the general tree. Not inlined: its scratch
+    /// (a few kilobytes) then takes stack only when a grid needs it.
+    #[inline(never)]
+    fn general<S: Samples>(
+        &self,
+        samples: &S,
+        (positions, rotations): (&mut [Vec3], &mut [Quat]),
+        wide: bool,
+    ) -> Result<(), GridError> {
+        let plan = self.plan();
+        if wide {
+            plan.pose(samples, positions, rotations)
+        } else {
+            plan.scalar_any(samples, 0, (positions, rotations))
+        }
+    }
+
+    /// The window and rotation coefficients of the general tree.
+    fn plan(&self) -> Plan {
+        let mut axes = [AxisWeights::Linear(SlerpWeight::START); MAX_AXES];
+        for (w, a) in axes.iter_mut().zip(self.used_axes()) {
+            *w = a.rotation_weights();
+        }
+        Plan {
+            window: self.window(),
+            axes,
+            axis_count: self.axis_count,
+        }
+    }
+}
