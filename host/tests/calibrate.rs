@@ -90,7 +90,7 @@ fn calibrate_in_a_terminal_jogs_the_emulated_board_and_writes_the_rig() {
         return;
     }
     // Built here first, so that the tool's own build is a no-op.
-    marionette_host::qemu::build_firmware("perform").expect("firmware builds");
+    marionette_host::qemu::firmware_elf("perform").expect("the embedded firmware is written out");
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let original = std::fs::read_to_string(repo.join("rigs/humanoid16.toml")).unwrap();
     assert!(original.contains(CHANNEL_1));

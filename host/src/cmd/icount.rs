@@ -19,7 +19,7 @@ const PERFORM_FRAMES: usize = 500;
 pub fn run(args: &Args) -> Result<(), CmdError> {
     let console = icount::run_bench()?;
     let rows = icount::parse(&console)?;
-    let perform = icount::footprint(&crate::qemu::build_firmware("perform")?)?;
+    let perform = icount::footprint(&crate::qemu::firmware_elf("perform")?)?;
     let stack = icount::stack_bytes(&console);
     let perform_stack = icount::perform_stack(PERFORM_FRAMES)?;
     if args.json {

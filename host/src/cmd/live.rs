@@ -177,7 +177,7 @@ fn board(args: &Args, rig: &rigfile::RigFile) -> Result<(Board, String, u32), Cm
     let image = perform::region(&rigfile::to_blob(rig)?, Some(&tables));
     crate::save::save(&region, &image, &[])?;
     let servo = args.out.join("servo_live.bin");
-    let elf = qemu::build_firmware("perform")?;
+    let elf = qemu::firmware_elf("perform")?;
     let board = PtyBoard::start(&elf, &region, &servo)?;
     let port = board.pty().display().to_string();
     let baud = args.baud.unwrap_or(EMULATED_BAUD);
