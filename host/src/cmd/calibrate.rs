@@ -52,7 +52,9 @@ use toml_edit::{DocumentMut, Item, Value};
 /// Arguments of `marionette calibrate`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The rig file (docs/rig.md; read, and written with the limits found).
+    /// The rig file (docs/rig.md; read, and written with the limits found),
+    /// or a rig name: `rigs/<name>.toml` here (a built-in rig is refused,
+    /// having no file to write to).
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The servo channel to calibrate.

@@ -48,7 +48,8 @@ pub struct Args {
     /// into marionette: a path that does not exist here is looked up there.
     #[arg(long, default_value = "data/builds/reach_humanoid16.toml")]
     pub spec: PathBuf,
-    /// The rig file (TOML; docs/rig.md), or a rig name: `rigs/<name>.toml` here, else a rig built in (humanoid16, cmu31).
+    /// The rig file (TOML; docs/rig.md), or a rig name: `rigs/<name>.toml`
+    /// here, else a rig built in (humanoid16, cmu31).
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The tracker recording (CSV; docs/recording.md).

@@ -49,7 +49,8 @@ pub const EMULATED_BAUD: u32 = 200_000;
 /// Arguments of `marionette live`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The rig file (docs/rig.md), with its `[live]` table.
+    /// The rig file (docs/rig.md), with its `[live]` table, or a rig name:
+    /// `rigs/<name>.toml` here, else a rig built in (humanoid16, cmu31).
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The table blob for the emulated board (`marionette demo` writes
