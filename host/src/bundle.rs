@@ -6,7 +6,7 @@
 //! - the bundled rigs (`rigs/*.toml`) and the demo's data (its build spec,
 //!   the HDM05 mocap the spec reads and the held-out recording).
 //!
-//! QEMU and the file readers want paths, so [`firmware`] and [`file`] write
+//! QEMU and the file readers want paths, so [`firmware()`] and [`file()`] write
 //! the embedded bytes once into a folder under the system's temporary folder
 //! named for their content (`marionette-<hash>/`, the repository's layout
 //! inside) and return the path there. A file already there with the same
