@@ -69,11 +69,39 @@ fn not_bundled(name: &str) -> std::io::Error {
 }
 
 /// The bundle's folder: `marionette-<hash of every embedded byte>` in the
-/// system's temporary folder.
+/// system's temporary folder, shared by every run of this build. If that
+/// name is taken by another user (or is not a plain folder), a fresh private
+/// folder `marionette-XXXXXX` is used instead.
 #[must_use]
 pub fn folder() -> &'static Path {
     static FOLDER: OnceLock<PathBuf> = OnceLock::new();
-    FOLDER.get_or_init(|| std::env::temp_dir().join(format!("marionette-{}", embedded::HASH)))
+    FOLDER.get_or_init(|| {
+        let shared = std::env::temp_dir().join(format!("marionette-{}", embedded::HASH));
+        if ours(&shared) {
+            return shared;
+        }
+        tempfile::Builder::new()
+            .prefix("marionette-")
+            .tempdir()
+            .map_or(shared, tempfile::TempDir::keep)
+    })
+}
+
+/// Whether `dir` is (now) a real folder owned by this process's user.
+fn ours(dir: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt as _;
+    let _ = std::fs::create_dir_all(dir);
+    let probe = tempfile::NamedTempFile::new();
+    match (std::fs::symlink_metadata(dir), probe) {
+        (Ok(meta), Ok(probe)) => {
+            meta.is_dir()
+                && probe
+                    .as_file()
+                    .metadata()
+                    .is_ok_and(|p| p.uid() == meta.uid())
+        }
+        _ => false,
+    }
 }
 
 /// Writes `bytes` to `<folder>/rel` unless that file already holds them.

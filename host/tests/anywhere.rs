@@ -112,3 +112,28 @@ fn calibrate_refuses_to_write_into_a_built_in_rig() {
         text(&out)
     );
 }
+
+#[test]
+fn a_bundle_folder_name_taken_by_something_else_is_not_used() {
+    let (cwd, tmp) = (elsewhere(), elsewhere());
+    std::fs::write(cwd.path().join("g.json"), GOALS).unwrap();
+    // This build's shared folder name, taken by a plain file.
+    let name = marionette_host::bundle::folder().file_name().unwrap();
+    assert!(name.to_str().unwrap().starts_with("marionette-"));
+    let taken = tmp.path().join(name);
+    std::fs::write(&taken, "not a folder").unwrap();
+    let out = marionette(
+        cwd.path(),
+        tmp.path(),
+        &["solve", "humanoid16", "--goals", "g.json"],
+    );
+    assert!(out.status.success(), "{}", text(&out));
+    assert_eq!(std::fs::read_to_string(&taken).unwrap(), "not a folder");
+    // A private folder beside it holds the rig instead.
+    let private: Vec<_> = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("rigs/humanoid16.toml").is_file())
+        .collect();
+    assert_eq!(private.len(), 1, "{private:?}");
+}
