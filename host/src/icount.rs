@@ -148,7 +148,7 @@ fn bundled(rel: &str) -> Result<std::path::PathBuf, IcountError> {
         .map_err(|e| IcountError::Qemu(QemuError::Io(e)))
 }
 
-/// Builds and runs the bench firmware under `-icount` and returns its
+/// Runs the bench firmware (built into marionette) under `-icount` and returns its
 /// console output.
 pub fn run_bench() -> Result<String, IcountError> {
     let elf = qemu::firmware_elf("bench")?;
@@ -195,7 +195,7 @@ pub fn perform_stack(frames: usize) -> Result<Option<u32>, IcountError> {
     Ok(run.board_stack)
 }
 
-/// Builds and runs the bench firmware under `-icount` and returns its rows.
+/// Runs the bench firmware (built into marionette) under `-icount` and returns its rows.
 pub fn measure() -> Result<Vec<Row>, IcountError> {
     parse(&run_bench()?)
 }

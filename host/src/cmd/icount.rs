@@ -11,11 +11,11 @@ pub struct Args {
     pub json: bool,
 }
 
-/// Builds and runs the bench firmware under `-icount` and prints its rows.
 /// Time steps of the bundled recording performed to measure the `perform`
 /// firmware's stack.
 const PERFORM_FRAMES: usize = 500;
 
+/// Runs the bench firmware (built into marionette) under `-icount` and prints its rows.
 pub fn run(args: &Args) -> Result<(), CmdError> {
     let console = icount::run_bench()?;
     let rows = icount::parse(&console)?;
