@@ -3,7 +3,8 @@
 //!
 //! - the emulated board's firmware (`firmware/`, its own workspace, built for
 //!   `thumbv7em-none-eabihf` with a nested `cargo build --release --bins` into
-//!   `firmware/target`, the folder `tests/run` builds it in too);
+//!   `firmware/target`, the folder `tests/run` builds it in too): every
+//!   `[[bin]]` that requires the `qemu` feature;
 //! - the bundled rigs (`rigs/*.toml`) and the demo's data (its build spec, the
 //!   HDM05 mocap that spec reads, and the held-out recording).
 //!
@@ -15,8 +16,6 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::{env, fs};
 
-/// The firmware binaries the host runs on QEMU.
-const FIRMWARE_BINS: [&str; 3] = ["perform", "bench", "echo"];
 /// The firmware's target triple (as in `firmware/.cargo/config.toml`).
 const TARGET: &str = "thumbv7em-none-eabihf";
 /// The demo's data, relative to the repository root.
@@ -67,7 +66,8 @@ fn main() {
     }
     println!("cargo:rerun-if-changed=build.rs");
 
-    let elfs = firmware_elf(&firmware);
+    let bins = emulated_bins(&firmware.join("Cargo.toml"));
+    let elfs = build_firmware(&firmware, &bins);
     let mut rigs: Vec<String> = fs::read_dir(root.join("rigs"))
         .expect("rigs/ exists")
         .filter_map(Result::ok)
@@ -79,7 +79,7 @@ fn main() {
 
     let mut code = String::from("/// The embedded firmware ELFs: `(binary name, bytes)`.\n");
     code.push_str("pub const FIRMWARE: &[(&str, &[u8])] = &[\n");
-    for (bin, elf) in FIRMWARE_BINS.iter().zip(&elfs) {
+    for (bin, elf) in bins.iter().zip(&elfs) {
         writeln!(code, "    ({bin:?}, include_bytes!({:?})),", elf.display()).unwrap();
     }
     code.push_str("];\n/// The bundled files: `(path relative to the repository, bytes)`.\n");
@@ -100,11 +100,8 @@ fn main() {
     }
     code.push_str("];\n");
     let mut hash = Fnv::default();
-    for (name, path) in FIRMWARE_BINS
-        .iter()
-        .zip(&elfs)
-        .chain(bundled.iter().map(|(n, p)| (n, p)))
-    {
+    let firmware_files = bins.iter().map(String::as_str).zip(&elfs);
+    for (name, path) in firmware_files.chain(bundled.iter().map(|(n, p)| (*n, p))) {
         hash.write(name.as_bytes());
         hash.write(&fs::read(path).expect("bundled file reads"));
     }
@@ -117,9 +114,35 @@ fn main() {
     fs::write(out.join("bundle.rs"), code).expect("OUT_DIR is writable");
 }
 
-/// Builds the firmware binaries (release, panic-never) and copies their ELFs
-/// into `OUT_DIR`, returning the copies' paths in [`FIRMWARE_BINS`] order.
-fn firmware_elf(firmware: &Path) -> Vec<PathBuf> {
+/// The firmware's `[[bin]]`s for the emulated board: those whose
+/// `required-features` name `qemu` (read line by line from its Cargo.toml).
+fn emulated_bins(manifest: &Path) -> Vec<String> {
+    let text = fs::read_to_string(manifest).expect("firmware/Cargo.toml reads");
+    let mut bins = Vec::new();
+    for section in text.split("[[bin]]").skip(1) {
+        let section = section.split("\n[").next().unwrap_or(section);
+        let value = |key: &str| {
+            section
+                .lines()
+                .find_map(|l| l.trim().strip_prefix(key)?.trim().strip_prefix('='))
+                .map(str::trim)
+        };
+        let name = value("name").map(|v| v.trim_matches('"').to_string());
+        let features = value("required-features").unwrap_or("");
+        if let Some(name) = name.filter(|_| features.contains("\"qemu\"")) {
+            bins.push(name);
+        }
+    }
+    assert!(
+        !bins.is_empty(),
+        "firmware/Cargo.toml names no emulated-board [[bin]]"
+    );
+    bins
+}
+
+/// Builds the firmware binaries (release, panic-never) and copies the ELFs of
+/// `bins` into `OUT_DIR`, returning the copies' paths in that order.
+fn build_firmware(firmware: &Path, bins: &[String]) -> Vec<PathBuf> {
     let cargo = env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let target_dir = firmware.join("target");
     let mut cmd = Command::new(cargo);
@@ -137,8 +160,7 @@ fn firmware_elf(firmware: &Path) -> Vec<PathBuf> {
         firmware.display()
     );
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    FIRMWARE_BINS
-        .iter()
+    bins.iter()
         .map(|bin| {
             let built = target_dir.join(TARGET).join("release").join(bin);
             let copy = out.join(format!("{bin}.elf"));
