@@ -220,7 +220,7 @@ fn board(region: &[u8]) -> (Emulator, tempfile::NamedTempFile) {
     let config = Config {
         tables: Some(file.path().to_path_buf()),
         timeout: Duration::from_secs(180),
-        ..Config::new(qemu::build_firmware("perform").expect("firmware builds"))
+        ..Config::new(qemu::firmware_elf("perform").expect("the embedded firmware is written out"))
     };
     (Emulator::start(&config).expect("QEMU starts"), file)
 }

@@ -7,7 +7,7 @@ use marionette_host::qemu::{self, Config, TABLE_REGION_LEN};
 use std::io::Write;
 
 fn echo_elf() -> std::path::PathBuf {
-    qemu::build_firmware("echo").expect("firmware builds")
+    qemu::firmware_elf("echo").expect("the embedded firmware is written out")
 }
 
 #[test]

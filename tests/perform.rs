@@ -334,7 +334,7 @@ fn the_emulated_board_reports_its_failsafe_trip_and_the_replay_follows_it() {
     use marionette_host::qemu;
     let s = setup_with(150, false, None);
     let channels = 16;
-    let elf = qemu::build_firmware("perform").unwrap();
+    let elf = qemu::firmware_elf("perform").unwrap();
     let config = qemu::Config {
         tables: Some(s.region_file.path().to_path_buf()),
         timeout: Duration::from_secs(120),

@@ -91,7 +91,7 @@ fn apart(a: &Step, b: &Step) -> f32 {
 
 #[test]
 fn the_cost_model_bounds_every_solve_on_the_emulated_board() {
-    let elf = qemu::build_firmware("cost").unwrap();
+    let elf = qemu::firmware_elf("cost").unwrap();
     let mut region = tempfile::NamedTempFile::new().unwrap();
     std::io::Write::write_all(&mut region, &icount::bench_region().unwrap()).unwrap();
     let config = qemu::Config {

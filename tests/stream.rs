@@ -34,7 +34,7 @@ fn stream_at_1_khz_over_a_pty_drops_frames_never_stalls_and_matches_sim() {
         .write_all(&text)
         .unwrap();
 
-    let elf = qemu::build_firmware("perform").unwrap();
+    let elf = qemu::firmware_elf("perform").unwrap();
     let mut board = qemu::PtyBoard::start(&elf, &region_file, &servo_file).unwrap();
     let args = Args {
         port: board.pty().display().to_string(),

@@ -130,7 +130,7 @@ pub fn parse(console: &str) -> Result<Vec<Row>, IcountError> {
 /// `humanoid16` rig (3 parameters, 4 goals) and a 5×5×5 grid over the hand
 /// parameters whose samples are the rest pose.
 pub fn bench_region() -> Result<Vec<u8>, IcountError> {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../rigs/humanoid16.toml");
+    let path = bundled("rigs/humanoid16.toml")?;
     let rig = rigfile::load(&path).map_err(|e| IcountError::Region(e.to_string()))?;
     let blob = rigfile::to_blob(&rig).map_err(|e| IcountError::Region(e.to_string()))?;
     let axes = [
@@ -142,10 +142,17 @@ pub fn bench_region() -> Result<Vec<u8>, IcountError> {
     Ok(perform::region(&blob, Some(&table)))
 }
 
-/// Builds and runs the bench firmware under `-icount` and returns its
+/// The path of a file built into marionette (see [`crate::bundle`]).
+fn bundled(rel: &str) -> Result<std::path::PathBuf, IcountError> {
+    crate::bundle::file(std::path::Path::new(rel))
+        .ok_or_else(|| IcountError::Region(format!("{rel} is not built into marionette")))?
+        .map_err(|e| IcountError::Qemu(QemuError::Io(e)))
+}
+
+/// Runs the bench firmware (built into marionette) under `-icount` and returns its
 /// console output.
 pub fn run_bench() -> Result<String, IcountError> {
-    let elf = qemu::build_firmware("bench")?;
+    let elf = qemu::firmware_elf("bench")?;
     let mut region = tempfile::NamedTempFile::new().map_err(QemuError::Io)?;
     std::io::Write::write_all(&mut region, &bench_region()?).map_err(QemuError::Io)?;
     let config = Config {
@@ -166,9 +173,8 @@ pub fn run_bench() -> Result<String, IcountError> {
 /// time steps of the bundled tracker recording performed on the bench's
 /// table region (the whole live loop, fail-safe easing included).
 pub fn perform_stack(frames: usize) -> Result<Option<u32>, IcountError> {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let samples =
-        crate::import::csv::read_tracker_csv(&root.join("data/recordings/reach_hdm05_007.csv"))?;
+    let recording = bundled("data/recordings/reach_hdm05_007.csv")?;
+    let samples = crate::import::csv::read_tracker_csv(&recording)?;
     let mut all = perform::frames(&samples)?;
     all.truncate(frames);
     let session = perform::session(&all)?;
@@ -255,7 +261,7 @@ pub fn replay(
             image.len()
         )));
     }
-    let elf = qemu::build_firmware("replay")?;
+    let elf = qemu::firmware_elf("replay")?;
     let mut file = tempfile::NamedTempFile::new().map_err(QemuError::Io)?;
     std::io::Write::write_all(&mut file, &image).map_err(QemuError::Io)?;
     let config = Config {
@@ -310,7 +316,7 @@ pub fn parse_frames(console: &str) -> Result<Vec<FrameCost>, IcountError> {
     Ok(frames)
 }
 
-/// Builds and runs the bench firmware under `-icount` and returns its rows.
+/// Runs the bench firmware (built into marionette) under `-icount` and returns its rows.
 pub fn measure() -> Result<Vec<Row>, IcountError> {
     parse(&run_bench()?)
 }

@@ -7,6 +7,7 @@
 pub mod blob;
 pub mod board;
 pub mod build;
+pub mod bundle;
 pub mod capacity;
 pub mod cmd;
 pub mod flash;

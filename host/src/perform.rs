@@ -814,7 +814,7 @@ pub fn emulate(
     })?;
     let format = ServoFormat::of_region(&region_bytes, channels)
         .unwrap_or(ServoFormat::Maestro { channels });
-    let elf = qemu::build_firmware("perform")?;
+    let elf = qemu::firmware_elf("perform")?;
     let span = session.last().map_or(0, |l| {
         let first = session.first().map_or(0, |f| f.time_us);
         l.time_us.wrapping_sub(first)

@@ -17,7 +17,7 @@ use std::io::{Read, Write};
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
@@ -41,12 +41,12 @@ pub enum QemuError {
          (apt-get install -y --no-install-recommends {QEMU_PACKAGE})"
     )]
     Missing,
-    /// `cargo build` of the firmware failed.
-    #[error("building the firmware in {dir} failed: {why}")]
-    Build {
-        /// The firmware folder.
-        dir: PathBuf,
-        /// Cargo's exit status or the spawn error.
+    /// The embedded firmware could not be written out for QEMU.
+    #[error("the firmware `{bin}` built into marionette could not be written out: {why}")]
+    Firmware {
+        /// The firmware binary.
+        bin: String,
+        /// The I/O error.
         why: String,
     },
     /// A table blob does not fit the table region.
@@ -68,14 +68,6 @@ pub enum QemuError {
     Io(#[from] std::io::Error),
 }
 
-/// The repository's `firmware/` folder.
-#[must_use]
-pub fn firmware_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join("firmware")
-}
-
 /// Fails with [`QemuError::Missing`] unless `qemu-system-arm` is on PATH.
 pub fn check_qemu() -> Result<PathBuf, QemuError> {
     find_qemu(&std::env::var_os("PATH").unwrap_or_default())
@@ -89,40 +81,15 @@ pub fn find_qemu(path: &std::ffi::OsStr) -> Result<PathBuf, QemuError> {
         .ok_or(QemuError::Missing)
 }
 
-/// Builds the emulated board's firmware binaries (release, panic-never) once
-/// per process and returns the path of `bin`'s ELF.
-pub fn build_firmware(bin: &str) -> Result<PathBuf, QemuError> {
-    static BUILT: OnceLock<Result<(), String>> = OnceLock::new();
-    let dir = firmware_dir();
-    let target_dir = dir.join("target");
-    let result = BUILT.get_or_init(|| {
-        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let status = Command::new(cargo)
-            .current_dir(&dir)
-            .args(["build", "--quiet", "--release", "--bins", "--target-dir"])
-            .arg(&target_dir)
-            // Never inherit the outer build's flags or jobserver.
-            .env_remove("RUSTFLAGS")
-            .env_remove("CARGO_ENCODED_RUSTFLAGS")
-            .env_remove("CARGO_BUILD_TARGET")
-            .env_remove("CARGO_TARGET_DIR")
-            .env_remove("CARGO_MAKEFLAGS")
-            .env_remove("MAKEFLAGS")
-            .env_remove("MFLAGS")
-            .status();
-        match status {
-            Ok(s) if s.success() => Ok(()),
-            Ok(s) => Err(s.to_string()),
-            Err(e) => Err(e.to_string()),
-        }
-    });
-    if let Err(why) = result {
-        return Err(QemuError::Build {
-            dir,
-            why: why.clone(),
-        });
-    }
-    Ok(target_dir.join(TARGET).join("release").join(bin))
+/// The path of the emulated board's firmware binary `bin` (`perform`,
+/// `bench` or `echo`): the ELF built into this program with it (release,
+/// panic-never, from the same sources; see [`crate::bundle`]), written to the
+/// bundle folder on first use. Needs neither cargo nor the source tree.
+pub fn firmware_elf(bin: &str) -> Result<PathBuf, QemuError> {
+    crate::bundle::firmware(bin).map_err(|e| QemuError::Firmware {
+        bin: bin.to_string(),
+        why: e.to_string(),
+    })
 }
 
 /// How to boot the emulated board.

@@ -362,18 +362,28 @@ pub fn write_blob(rig: &RigFile, out: &Path) -> Result<(), RigFileError> {
     })
 }
 
-/// Resolves the path of a rig argument: as given, or `rigs/<name>.toml`.
+/// Resolves the path of a rig argument, searching in this order:
+///
+/// 1. the argument as a path, if it exists;
+/// 2. `rigs/<name>.toml` in the current folder;
+/// 3. the rigs built into marionette (the repository's `rigs/*.toml`,
+///    `humanoid16` and `cmu31`), by name or as `rigs/<name>.toml`, written
+///    out to the bundle folder (see [`crate::bundle`]).
+///
+/// Otherwise the argument as given (loading it then names the missing file).
 #[must_use]
 pub fn resolve(arg: &Path) -> PathBuf {
     if arg.exists() {
         return arg.to_path_buf();
     }
-    let candidate = Path::new("rigs").join(arg).with_extension("toml");
-    if candidate.exists() {
-        candidate
-    } else {
-        arg.to_path_buf()
+    let local = Path::new("rigs").join(arg).with_extension("toml");
+    if local.exists() {
+        return local;
     }
+    [arg, local.as_path()]
+        .into_iter()
+        .find_map(|rel| crate::bundle::file(rel)?.ok())
+        .unwrap_or_else(|| arg.to_path_buf())
 }
 
 // ---------------------------------------------------------------------------

@@ -95,7 +95,7 @@ fn start(rig_text: &str) -> Option<(Tmux, std::path::PathBuf, tempfile::TempDir)
         return None;
     }
     // Built here first, so that the tool's own build is a no-op.
-    marionette_host::qemu::build_firmware("perform").expect("firmware builds");
+    marionette_host::qemu::firmware_elf("perform").expect("the embedded firmware is written out");
     let dir = tempfile::tempdir().unwrap();
     let rig = dir.path().join("puppet.toml");
     std::fs::write(&rig, rig_text).unwrap();

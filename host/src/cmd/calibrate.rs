@@ -52,7 +52,9 @@ use toml_edit::{DocumentMut, Item, Value};
 /// Arguments of `marionette calibrate`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The rig file (docs/rig.md; read, and written with the limits found).
+    /// The rig file (docs/rig.md; read, and written with the limits found),
+    /// or a rig name: `rigs/<name>.toml` here (a built-in rig is refused,
+    /// having no file to write to).
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The servo channel to calibrate.
@@ -149,7 +151,7 @@ fn boot_emulated(region: &[u8]) -> Result<Emulated, CmdError> {
     let config = Config {
         tables: Some(file.path().to_path_buf()),
         timeout: Duration::from_secs(6 * 3600),
-        ..Config::new(qemu::build_firmware("perform")?)
+        ..Config::new(qemu::firmware_elf("perform")?)
     };
     Ok(Emulated {
         emulator: Emulator::start(&config)?,
@@ -354,6 +356,15 @@ fn unusable(status: &Status) -> Option<String> {
 /// Runs the keyboard session.
 pub fn run(args: &Args) -> Result<(), CmdError> {
     let path = rigfile::resolve(&args.rig);
+    if path.starts_with(crate::bundle::folder()) {
+        return Err(format!(
+            "{}: a rig built into marionette has no file to write the limits to; \
+             copy {} and calibrate the copy",
+            args.rig.display(),
+            path.display()
+        )
+        .into());
+    }
     let rig = rigfile::load(&path)?;
     let desc = rig.desc();
     let servo = *desc

@@ -43,10 +43,13 @@ use std::time::Instant;
 /// Arguments of `marionette demo`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The table's build spec (docs/spec.md).
+    /// The table's build spec (docs/spec.md). The defaults of `--spec`,
+    /// `--rig` and `--recording` (and the mocap the spec reads) are built
+    /// into marionette: a path that does not exist here is looked up there.
     #[arg(long, default_value = "data/builds/reach_humanoid16.toml")]
     pub spec: PathBuf,
-    /// The rig file (TOML; docs/rig.md), or the name of one in `rigs/`.
+    /// The rig file (TOML; docs/rig.md), or a rig name: `rigs/<name>.toml`
+    /// here, else a rig built in (humanoid16, cmu31).
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The tracker recording (CSV; docs/recording.md).
@@ -63,19 +66,18 @@ pub struct Args {
     pub json: bool,
 }
 
-/// A path as given if it exists, else relative to the workspace root (so
-/// the defaults work from any directory of a source checkout).
+/// A path as given if it exists, else the file of that repository path
+/// built into marionette (the demo's spec, the mocap it reads, its recording
+/// and the bundled rigs; see [`crate::bundle`]), so the defaults work from
+/// any folder.
 #[must_use]
 pub fn repo_path(p: &Path) -> PathBuf {
     if p.exists() || p.is_absolute() {
         return p.to_path_buf();
     }
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let there = root.join(p);
-    if there.exists() {
-        there
-    } else {
-        p.to_path_buf()
+    match crate::bundle::file(p) {
+        Some(Ok(there)) => there,
+        _ => p.to_path_buf(),
     }
 }
 

@@ -22,7 +22,8 @@ use std::time::Instant;
 /// Arguments of `marionette emulate`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The rig file (TOML; docs/rig.md), or the name of one in `rigs/`.
+    /// The rig file (TOML; docs/rig.md), or a rig name: `rigs/<name>.toml`
+    /// here, else a rig built in (humanoid16, cmu31).
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The table blob (`marionette build`); without it the board does not arm.

@@ -11,15 +11,15 @@ pub struct Args {
     pub json: bool,
 }
 
-/// Builds and runs the bench firmware under `-icount` and prints its rows.
 /// Time steps of the bundled recording performed to measure the `perform`
 /// firmware's stack.
 const PERFORM_FRAMES: usize = 500;
 
+/// Runs the bench firmware (built into marionette) under `-icount` and prints its rows.
 pub fn run(args: &Args) -> Result<(), CmdError> {
     let console = icount::run_bench()?;
     let rows = icount::parse(&console)?;
-    let perform = icount::footprint(&crate::qemu::build_firmware("perform")?)?;
+    let perform = icount::footprint(&crate::qemu::firmware_elf("perform")?)?;
     let stack = icount::stack_bytes(&console);
     let perform_stack = icount::perform_stack(PERFORM_FRAMES)?;
     if args.json {

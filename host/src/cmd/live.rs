@@ -49,7 +49,8 @@ pub const EMULATED_BAUD: u32 = 200_000;
 /// Arguments of `marionette live`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The rig file (docs/rig.md), with its `[live]` table.
+    /// The rig file (docs/rig.md), with its `[live]` table, or a rig name:
+    /// `rigs/<name>.toml` here, else a rig built in (humanoid16, cmu31).
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The table blob for the emulated board (`marionette demo` writes
@@ -177,7 +178,7 @@ fn board(args: &Args, rig: &rigfile::RigFile) -> Result<(Board, String, u32), Cm
     let image = perform::region(&rigfile::to_blob(rig)?, Some(&tables));
     crate::save::save(&region, &image, &[])?;
     let servo = args.out.join("servo_live.bin");
-    let elf = qemu::build_firmware("perform")?;
+    let elf = qemu::firmware_elf("perform")?;
     let board = PtyBoard::start(&elf, &region, &servo)?;
     let port = board.pty().display().to_string();
     let baud = args.baud.unwrap_or(EMULATED_BAUD);

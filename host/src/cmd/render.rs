@@ -65,8 +65,9 @@ impl BodyName {
 /// Arguments of `marionette render`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The rig file whose skeleton the pose belongs to (a path, or a name
-    /// under `rigs/`); instead of `--body`.
+    /// The rig file whose skeleton the pose belongs to (a path, or a rig
+    /// name: `rigs/<name>.toml` here, else a rig built in (humanoid16,
+    /// cmu31)); instead of `--body`.
     #[arg(long, conflicts_with = "body")]
     pub rig: Option<PathBuf>,
     /// The shipped body the pose belongs to (without `--rig`).

@@ -47,7 +47,8 @@ pub enum RigCommand {
 /// Arguments of `marionette rig check`.
 #[derive(clap::Args, Debug)]
 pub struct CheckArgs {
-    /// The rig file (TOML; docs/rig.md), or the name of one in `rigs/`.
+    /// The rig file (TOML; docs/rig.md), or a rig name: `rigs/<name>.toml`
+    /// here, else a rig built in (humanoid16, cmu31).
     pub rig: PathBuf,
     /// Print the report as JSON.
     #[arg(long)]

@@ -101,7 +101,8 @@ pub enum RootArg {
 /// Arguments of `marionette solve`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The rig file (TOML; docs/rig.md), or the name of one in `rigs/` (e.g. `humanoid16`).
+    /// The rig file (TOML; docs/rig.md), or a rig name (`humanoid16`):
+    /// `rigs/<name>.toml` here, else a rig built in (humanoid16, cmu31).
     pub rig: PathBuf,
     /// The goals file (JSON; the format: docs/goals.md).
     #[arg(long)]

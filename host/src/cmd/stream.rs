@@ -50,7 +50,9 @@ pub struct Args {
     /// The tracker recording (CSV; docs/recording.md).
     #[arg(long)]
     pub recording: PathBuf,
-    /// The rig file (docs/rig.md; for its frame period, the rig itself is in the board's flash).
+    /// The rig file (docs/rig.md; for its frame period, the rig itself is in
+    /// the board's flash), or a rig name: `rigs/<name>.toml` here, else a
+    /// rig built in (humanoid16, cmu31).
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// Send every frame as soon as the link takes it (nothing dropped, not
