@@ -63,7 +63,7 @@ pub struct Mocap {
     pub rig: Rig,
     /// The clips, in spec order.
     pub clips: Vec<Clip>,
-    /// Clips whose frame rate looks wrong ([`rate_warnings`]).
+    /// Clips whose frame rate looks wrong (see `rate_warnings`).
     pub warnings: Vec<String>,
 }
 

@@ -12,7 +12,7 @@
 //! pose is corrected with the core's default solver (whole-tree damped least
 //! squares, root fixed, joint limits of the rig file): the probe goes to its
 //! grid point and the rest of the body follows by as little as the damped
-//! step allows. Wiley & Hahn: "[we] can accommodate higher accuracy or
+//! step allows. Wiley & Hahn: "\[we\] can accommodate higher accuracy or
 //! sparse data using iterative optimizations".
 //!
 //! The same solve measures a held-out pose "after solving" ([`RigBody`]).
