@@ -585,15 +585,16 @@ fn corrupted_tables_are_refused_at_boot_and_the_reason_reported() {
     let why = refused(&perform::region(&rig, Some(&t)));
     assert_eq!(why, StatusReason::BadMagic);
     rows.push(format!("magic bit flipped: {why:?}"));
-    // A wrong format version with a correct CRC.
+    // A format version from the future with a correct CRC.
     let mut t = table.clone();
-    t[4] = 2;
+    let future = marionette_core::table::VERSION + 1;
+    t[4..6].copy_from_slice(&future.to_le_bytes());
     let n = t.len();
     let crc = marionette_core::crc::crc32(&t[..n - 4]);
     t[n - 4..].copy_from_slice(&crc.to_le_bytes());
     let why = refused(&perform::region(&rig, Some(&t)));
     assert_eq!(why, StatusReason::BadVersion);
-    rows.push(format!("format version 2, CRC fixed: {why:?}"));
+    rows.push(format!("format version {future}, CRC fixed: {why:?}"));
     // A corrupted rig blob: nothing to drive at all.
     let mut r = rig.clone();
     let mid = r.len() / 2;

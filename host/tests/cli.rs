@@ -370,8 +370,8 @@ fn plot_draws_every_or_the_chosen_columns() {
     let lines = polylines(&text);
     // ch2 is the first colour, ch1 the second; ch1 has a gap: two runs.
     let runs = |c: &str| lines.iter().filter(|(k, p)| k == c && p.len() > 20).count();
-    assert_eq!(runs("#1F77B4"), 1, "ch2 in one line");
-    assert_eq!(runs("#FF7F0E"), 2, "ch1 split at its gap");
+    assert_eq!(runs("#F38400"), 1, "ch2 in one line");
+    assert_eq!(runs("#875692"), 2, "ch1 split at its gap");
     if font_available() {
         assert!(text.contains("ch2") && text.contains("ch1") && !text.contains(">ch0<"));
         assert!(text.contains("time (s)") && text.contains("pulse (µs)"));
