@@ -1155,6 +1155,54 @@ impl Series {
         Ok(series)
     }
 
+    /// A long table made wide: a recording with one row per `key` value and
+    /// time (a tracker recording's `sensor` column) becomes one column per
+    /// key value and other column (`sensor 0: x`), on the recording's
+    /// distinct times in order, NaN where a key has no row at a time (a gap
+    /// in its line). `None` if there is no column `key`, or a key value is
+    /// not a whole number.
+    #[must_use]
+    pub fn split_by(&self, key: &str) -> Option<Series> {
+        let k = self.columns.iter().position(|c| c.name == key)?;
+        let keys: Vec<i64> = self.columns[k]
+            .values
+            .iter()
+            .map(|v| (v.fract() == 0.0).then_some(*v as i64))
+            .collect::<Option<_>>()?;
+        let mut ids = keys.clone();
+        ids.sort_unstable();
+        ids.dedup();
+        let mut time: Vec<f64> = Vec::new();
+        let mut slot = Vec::with_capacity(self.time.len());
+        for &t in &self.time {
+            if time.last().is_none_or(|last| last.to_bits() != t.to_bits()) {
+                time.push(t);
+            }
+            slot.push(time.len() - 1);
+        }
+        let others: Vec<&Column> = self.columns.iter().filter(|c| c.name != key).collect();
+        let mut columns = Vec::new();
+        for id in &ids {
+            for c in &others {
+                let mut values = vec![f64::NAN; time.len()];
+                for ((row, v), at) in c.values.iter().enumerate().zip(&slot) {
+                    if keys[row] == *id {
+                        values[*at] = *v;
+                    }
+                }
+                columns.push(Column {
+                    name: format!("{key} {id}: {}", c.name),
+                    values,
+                });
+            }
+        }
+        Some(Series {
+            time_label: self.time_label.clone(),
+            time,
+            columns,
+        })
+    }
+
     /// Keeps only the named columns, in the order given.
     pub fn select(&mut self, names: &[String]) -> Result<(), RenderError> {
         let mut picked = Vec::with_capacity(names.len());
@@ -1556,6 +1604,24 @@ mod tests {
         assert_eq!(s.columns[0].values, vec![3.0]);
         let err = s.select(&["zz".into()]).unwrap_err();
         assert!(err.to_string().contains("\"zz\""), "{err}");
+    }
+
+    #[test]
+    fn a_recording_splits_by_sensor() {
+        // Two sensors at t = 0 and 1 ms, sensor 1 missing at 2 ms.
+        let text = "time_us,sensor,x\n0,0,1\n0,1,5\n1000,0,2\n1000,1,6\n2000,0,3\n";
+        let wide = Series::parse_csv(text).unwrap().split_by("sensor").unwrap();
+        assert_eq!(wide.time, [0.0, 0.001, 0.002]);
+        let names: Vec<&str> = wide.columns.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, ["sensor 0: x", "sensor 1: x"]);
+        assert_eq!(wide.columns[0].values, [1.0, 2.0, 3.0]);
+        assert_eq!(&wide.columns[1].values[..2], &[5.0, 6.0]);
+        assert!(wide.columns[1].values[2].is_nan());
+        // No such column, or a fractional key: not split.
+        let s = Series::parse_csv(text).unwrap();
+        assert!(s.split_by("id").is_none());
+        let frac = Series::parse_csv("t,sensor,x\n0,0.5,1\n").unwrap();
+        assert!(frac.split_by("sensor").is_none());
     }
 
     #[test]

@@ -2,7 +2,9 @@
 //!
 //! The first column is time (`time_us`, `time_ms` or `time_s`), the others
 //! numeric series, e.g. the servo targets `marionette sim`/`emulate` write
-//! (`time_us,ch0,ch1,...`, pulses in µs). See [`crate::render::Series`].
+//! (`time_us,ch0,ch1,...`, pulses in µs). A tracker recording (a `sensor`
+//! column) is split by sensor: one line per sensor and coordinate
+//! (`sensor 0: x`). See [`crate::render::Series`].
 
 use super::CmdError;
 use crate::render::{self, PlotOptions, Series};
@@ -40,6 +42,11 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         std::fs::read_to_string(&args.csv).map_err(|e| format!("{}: {e}", args.csv.display()))?;
     let mut series =
         Series::parse_csv(&text).map_err(|e| format!("{}: {e}", args.csv.display()))?;
+    // A tracker recording: one line per sensor and coordinate, not the
+    // sensor id drawn as a curve.
+    if let Some(wide) = series.split_by("sensor") {
+        series = wide;
+    }
     if !args.columns.is_empty() {
         series
             .select(&args.columns)
