@@ -31,10 +31,11 @@ pub mod watchdog;
 use super::{Board, Outcome};
 use cortex_m::peripheral::DWT;
 use marionette_core::output::support::UartRate;
+use marionette_core::output::support::{uart_divisor, uart_error_permille};
 use marionette_core::output::{Refusal, Support};
 use marionette_core::rig::{Output, ServoDesc};
 use stm32f4::stm32f411 as pac;
-use uart::{Uart, divisor, divisor_error_permille};
+use uart::Uart;
 use watchdog::Watchdog;
 
 pub use clock::SYSCLK_HZ;
@@ -43,9 +44,9 @@ pub use watchdog::TIMEOUT_MS as WATCHDOG_MS;
 /// Tracker link rate, bit/s.
 pub const TRACKER_BAUD: u32 = 921_600;
 
-const TRACKER_BRR: u16 = divisor(clock::PCLK2_HZ, TRACKER_BAUD);
+const TRACKER_BRR: u16 = uart_divisor(clock::PCLK2_HZ, TRACKER_BAUD);
 // Both ends of a UART link tolerate a few percent in total; keep ours under 1 %.
-const _: () = assert!(divisor_error_permille(clock::PCLK2_HZ, TRACKER_BAUD, TRACKER_BRR) < 10);
+const _: () = assert!(uart_error_permille(clock::PCLK2_HZ, TRACKER_BAUD, TRACKER_BRR) < 10);
 // 16× oversampling needs USARTDIV >= 1.
 const _: () = assert!(TRACKER_BRR >= 16);
 // The core's description of this board: USART2 on PCLK1.

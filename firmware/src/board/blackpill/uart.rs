@@ -2,38 +2,13 @@
 //!
 //! Register-level, so that no HAL code (and none of its panicking branches)
 //! sits between the app and the data register. The baud-rate divisor is a
-//! compile-time constant: see [`divisor`].
+//! compile-time constant, from the core's
+//! [`uart_divisor`](marionette_core::output::support::uart_divisor): with 16×
+//! oversampling BRR holds 16 × USARTDIV as mantissa:fraction (RM0383
+//! §19.3.4), which is `pclk / baud` rounded, the core's formula.
 
 use core::ops::Deref;
 use stm32f4::stm32f411::usart1::RegisterBlock;
-
-/// The BRR value for `baud` on a USART clocked at `pclk_hz` with 16×
-/// oversampling: `pclk / baud` rounded to the nearest 1/16 of USARTDIV
-/// (RM0383 §19.3.4: BRR holds 16 × USARTDIV as mantissa:fraction).
-///
-/// Meant for `const` items; checked with [`divisor_error_permille`]. Returns 0
-/// for `baud == 0`.
-#[must_use]
-pub const fn divisor(pclk_hz: u32, baud: u32) -> u16 {
-    match (pclk_hz + baud / 2).checked_div(baud) {
-        Some(d) if d <= 0xFFFF => d as u16,
-        _ => 0,
-    }
-}
-
-/// How far the rate given by `divisor` is from `baud`, in thousandths
-/// (rounded down). `u32::MAX` for a zero divisor or baud rate.
-#[must_use]
-pub const fn divisor_error_permille(pclk_hz: u32, baud: u32, divisor: u16) -> u32 {
-    let Some(actual) = pclk_hz.checked_div(divisor as u32) else {
-        return u32::MAX;
-    };
-    let diff = actual.abs_diff(baud) as u64 * 1000;
-    match diff.checked_div(baud as u64) {
-        Some(e) if e <= u32::MAX as u64 => e as u32,
-        _ => u32::MAX,
-    }
-}
 
 /// A receive error reported by the USART status register.
 ///
@@ -81,7 +56,7 @@ pub struct Uart<P> {
 
 impl<P: Deref<Target = RegisterBlock>> Uart<P> {
     /// Configures the port for 8N1 at the rate given by `brr` (see
-    /// [`divisor`]) and enables the transmitter and the receiver.
+    /// [`uart_divisor`](marionette_core::output::support::uart_divisor)) and enables the transmitter and the receiver.
     ///
     /// The caller has enabled the port's clock and routed its pins.
     pub fn new(port: P, brr: u16) -> Self {
