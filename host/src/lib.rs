@@ -24,3 +24,5 @@ pub mod render;
 pub mod rigfile;
 pub mod save;
 pub mod sender;
+#[cfg(feature = "view")]
+pub mod view;

@@ -54,6 +54,8 @@ enum Command {
     Rig(cmd::rig::Args),
     /// Perform from a live source (VMC / OSC over UDP) on the emulated or a real board.
     Live(cmd::live::Args),
+    /// The demo watched live in the browser (`demo --view`; read-only, localhost by default).
+    View(cmd::demo::Args),
 }
 
 fn main() -> ExitCode {
@@ -75,6 +77,10 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => cmd::calibrate::run(&args),
         Command::Rig(args) => cmd::rig::run(&args),
         Command::Live(args) => cmd::live::run(&args),
+        Command::View(mut args) => {
+            args.view.view = true;
+            cmd::demo::run(&args)
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

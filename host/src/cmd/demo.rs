@@ -64,6 +64,9 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+    /// The live view (`--view`, `--listen`).
+    #[command(flatten)]
+    pub view: super::view::ViewArgs,
 }
 
 /// A path as given if it exists, else the file of that repository path
@@ -235,8 +238,8 @@ pub struct Summary {
     pub board_seconds: f64,
 }
 
-/// Sum of all receive-error counters.
-fn error_total(e: &ErrorCounters) -> u32 {
+/// The sum of a board's receive-error counters.
+pub fn error_total(e: &ErrorCounters) -> u32 {
     [
         e.cobs, e.crc, e.decode, e.oversize, e.version, e.lost, e.stale, e.range,
     ]
@@ -296,8 +299,9 @@ fn servo_ranges(rig: &Rig<'_>, run: &Run) -> Vec<ServoRange> {
         .collect()
 }
 
-/// The goals of one tracker frame as marks on a solved pose.
-fn marks(rig: &Rig<'_>, frame: &TrackerFrame, pose: &Pose<MAX_SEGMENTS>) -> Vec<Mark> {
+/// The goals of one tracker frame as marks on a pose (the demo's pictures,
+/// the live view).
+pub fn marks(rig: &Rig<'_>, frame: &TrackerFrame, pose: &Pose<MAX_SEGMENTS>) -> Vec<Mark> {
     let mut params = [0.0f32; MAX_PARAMS];
     let mut goals = GoalSet::<MAX_GOALS>::new();
     let _ = rig.map_sensors(frame.sensors.as_slice(), &mut params, &mut goals);
@@ -437,7 +441,15 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         summary: emulated,
         stop,
         ..
-    } = super::emulate::compare(&inputs, &args.out, Pacing::AsFastAsPossible)?;
+    } = super::view::watched(
+        &args.view,
+        &inputs.region,
+        &format!("{}: {recording_name}", rig.name()),
+        &tracker_frames,
+        |watch| {
+            super::emulate::compare_watched(&inputs, &args.out, Pacing::AsFastAsPossible, watch)
+        },
+    )?;
     if let Some(stop) = stop {
         if args.json {
             println!("{}", serde_json::to_string_pretty(&emulated)?);

@@ -17,6 +17,7 @@ pub mod sim;
 pub mod solve;
 pub mod stream;
 pub mod synth;
+pub mod view;
 
 /// An error from any subcommand, printed by `main` as `marionette: <error>`.
 pub type CmdError = Box<dyn std::error::Error + Send + Sync>;
