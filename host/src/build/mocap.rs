@@ -43,7 +43,7 @@ use super::error::{BuildError, InputError};
 use super::resample::{Record, Value};
 use super::retarget::{CAP, Rig};
 use super::spec::{AxisSpec, ClipSpec, FrameKind, Measure, MocapSpec, MotionSpec, Spec};
-use crate::import::{self, EndSites, Motion};
+use crate::import::{self, EndSites, ImportError, Motion};
 
 /// One imported, retargeted clip in the mocap's world frame.
 #[derive(Debug, Clone)]
@@ -74,20 +74,25 @@ pub fn load(spec: &Spec, m: &MocapSpec, tick: &dyn Fn(&str)) -> Result<Mocap, Bu
     let mut clips = Vec::with_capacity(m.clips.len());
     for (i, c) in m.clips.iter().enumerate() {
         tick(&c.name);
+        let at_clip = |e: ImportError| clip_error(spec, c, i, &e);
         let motion = import_clip(spec, m, c, i)?;
-        let sk = motion.core_skeleton(if m.end_sites {
-            EndSites::Keep
-        } else {
-            EndSites::Drop
-        })?;
+        let sk = motion
+            .core_skeleton(if m.end_sites {
+                EndSites::Keep
+            } else {
+                EndSites::Drop
+            })
+            .map_err(at_clip)?;
         if rig.is_none() {
             rig = Some(match &spec.rig.file {
                 Some(path) => {
-                    let file =
-                        crate::rigfile::load(path).map_err(|e| BuildError::Data(e.to_string()))?;
+                    let file = crate::rigfile::load(path).map_err(|e| {
+                        spec.source
+                            .error_line(spec.rig.line, "rig.file", e.to_string())
+                    })?;
                     Rig::from_rigfile(file, &sk, &spec.source, &spec.rig)?
                 }
-                None => Rig::from_skeleton(&sk, &spec.rig, &spec.source)?,
+                None => Rig::from_skeleton(&sk, &spec.rig, &spec.source, c.line)?,
             });
             first_names.clone_from(&sk.names);
         } else if sk.names != first_names {
@@ -100,7 +105,10 @@ pub fn load(spec: &Spec, m: &MocapSpec, tick: &dyn Fn(&str)) -> Result<Mocap, Bu
         }
         let Some(rig) = rig.as_ref() else { continue };
         let frame_time = c.fps.or(m.fps).map_or(motion.frame_time, |f| 1.0 / f);
-        let poses = retarget_all(&motion, &sk, rig)?;
+        let poses = retarget_all(&motion, &sk, rig).map_err(|e| match e {
+            BuildError::Import(e) => at_clip(e),
+            other => other,
+        })?;
         clips.push(Clip {
             name: c.name.clone(),
             frame_time,
@@ -200,14 +208,34 @@ fn import_clip(spec: &Spec, m: &MocapSpec, c: &ClipSpec, i: usize) -> Result<Mot
                 .fps
                 .or(m.fps)
                 .map_or(import::amc::HDM05_FRAME_TIME, |f| 1.0 / f);
-            Ok(import::amc::read_motion(asf, &c.file, frame_time)?)
+            let skeleton = import::amc::read_asf(asf, None).map_err(|e| {
+                spec.source
+                    .error_line(m.skeleton_line, "mocap.skeleton", e.to_string())
+            })?;
+            let file = c.file.display().to_string();
+            let amc = import::open(&c.file)
+                .and_then(|r| import::amc::parse_amc(r, &file, &skeleton))
+                .map_err(|e| clip_error(spec, c, i, &e))?;
+            skeleton
+                .to_motion(&amc, frame_time)
+                .map_err(|e| clip_error(spec, c, i, &e))
         }
-        Some("bvh") => Ok(import::bvh::read_motion(&c.file, m.scale)?),
+        Some("bvh") => {
+            import::bvh::read_motion(&c.file, m.scale).map_err(|e| clip_error(spec, c, i, &e))
+        }
         _ => {
             let problem = format!("{}: expected a .bvh or .amc file", c.file.display());
             Err(spec.source.error_line(c.line, &field, problem).into())
         }
     }
+}
+
+/// A mocap file's error, located at the spec's `[[clip]] file` that names
+/// it (the mocap file's own line is in the message).
+fn clip_error(spec: &Spec, c: &ClipSpec, i: usize, e: &ImportError) -> BuildError {
+    spec.source
+        .error_line(c.line, &format!("clip[{i}].file"), e.to_string())
+        .into()
 }
 
 fn pose_error(file: &str, e: impl std::fmt::Debug) -> BuildError {

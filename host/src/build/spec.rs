@@ -149,6 +149,9 @@ pub enum Input {
 pub struct MocapSpec {
     /// ASF skeleton for AMC clips.
     pub skeleton: Option<PathBuf>,
+    /// Line of `[mocap] skeleton` (of `[mocap]` without one), for errors
+    /// found while reading it.
+    pub skeleton_line: usize,
     /// BVH metres per unit.
     pub scale: f64,
     /// Frame rate override.
@@ -377,7 +380,7 @@ struct Raw {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawMocap {
-    skeleton: Option<String>,
+    skeleton: Option<Spanned<String>>,
     scale: Option<Spanned<f64>>,
     fps: Option<Spanned<f64>>,
     every: Option<Spanned<usize>>,
@@ -456,16 +459,53 @@ pub fn read(path: &Path) -> Result<Spec, InputError> {
 /// The field a TOML error at byte `at` is about: the key on that line, or
 /// the table header.
 fn field_at(src: &Source, at: usize) -> String {
-    let start = src.text[..at.min(src.text.len())]
-        .rfind('\n')
-        .map_or(0, |i| i + 1);
+    let text = &src.text[..at.min(src.text.len())];
+    let start = text.rfind('\n').map_or(0, |i| i + 1);
     let line = src.text[start..].lines().next().unwrap_or("").trim();
     let field = match line.strip_prefix('[') {
         Some(header) => header.trim_matches(|c| c == '[' || c == ']').trim(),
         None => line.split_once('=').map_or("", |(k, _)| k.trim()),
     };
     // A bare `[` or ` = 1` names no key: the spec as a whole.
-    if field.is_empty() { "spec" } else { field }.to_owned()
+    if field.is_empty() {
+        return "spec".to_owned();
+    }
+    if line.starts_with('[') {
+        return field.to_owned();
+    }
+    // A key: under the nearest table header above it (`mocap.scale`,
+    // `clip[1].file` for the second `[[clip]]`).
+    let headers: Vec<&str> = text
+        .get(..start)
+        .unwrap_or("")
+        .lines()
+        .map(str::trim)
+        .filter(|l| is_header(l))
+        .collect();
+    match headers.last() {
+        Some(h) if h.starts_with("[[") => {
+            let name = h.trim_matches(|c| c == '[' || c == ']').trim();
+            let index = headers.iter().filter(|o| *o == h).count() - 1;
+            format!("{name}[{index}].{field}")
+        }
+        Some(h) => format!(
+            "{}.{field}",
+            h.trim_matches(|c| c == '[' || c == ']').trim()
+        ),
+        None => field.to_owned(),
+    }
+}
+
+/// Whether `line` (trimmed) is a table header, `[name]` or `[[name]]`
+/// (not the continuation of a multi-line array).
+fn is_header(line: &str) -> bool {
+    let code = line.split('#').next().unwrap_or("").trim_end();
+    code.starts_with('[')
+        && code.ends_with(']')
+        && code
+            .trim_matches(|c| c == '[' || c == ']')
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | ' '))
 }
 
 /// Parses a spec from its text; `dir` resolves relative paths.
@@ -639,7 +679,11 @@ impl Parser<'_> {
             }
         }
         Ok(MocapSpec {
-            skeleton: r.skeleton.as_deref().map(|s| self.path(s)),
+            skeleton: r.skeleton.as_ref().map(|s| self.path(s.get_ref())),
+            skeleton_line: r
+                .skeleton
+                .as_ref()
+                .map_or_else(|| self.line(&m.span()), |s| self.line(&s.span())),
             scale,
             fps,
             every,
@@ -1196,9 +1240,9 @@ count = 4
         let e = parse_text(&GOOD.replace("component = \"x\"", "component = \"w\"")).unwrap_err();
         assert_eq!((e.line, e.field.as_str()), (12, "axis[0].component"));
         let e = parse_text(&GOOD.replace("every = 2", "every = \"two\"")).unwrap_err();
-        assert_eq!((e.line, e.field.as_str()), (4, "every"));
+        assert_eq!((e.line, e.field.as_str()), (4, "mocap.every"));
         let e = parse_text(&GOOD.replace("every = 2", "evry = 2")).unwrap_err();
-        assert_eq!((e.line, e.field.as_str()), (4, "evry"));
+        assert_eq!((e.line, e.field.as_str()), (4, "mocap.evry"));
         assert!(e.problem.contains("evry"), "{e}");
         let e = parse_text(&GOOD.replace("kind = \"grid\"", "kind = \"table\"")).unwrap_err();
         assert_eq!((e.line, e.field.as_str()), (1, "kind"));
