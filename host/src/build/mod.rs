@@ -188,6 +188,8 @@ pub struct Dataset {
     pub param_frame: mocap::Frame,
     /// Clip tables: each group's normalized source frames with their phases.
     pub originals: Vec<mocap::Originals>,
+    /// Looping clip tables: each clip's seam (the cut given and used).
+    pub seams: Vec<mocap::Seam>,
     /// Seconds spent importing.
     pub load_seconds: f64,
     /// Import warnings (a clip whose frame rate looks wrong), each naming
@@ -322,6 +324,7 @@ fn from_examples(set: &examples::ExampleSet) -> Dataset {
         probe_axes: None,
         param_frame: mocap::Frame::WORLD,
         originals: Vec::new(),
+        seams: Vec::new(),
         load_seconds: 0.0,
         warnings: Vec::new(),
     }
@@ -353,8 +356,12 @@ fn from_mocap(
             .error_line(m.clips[0].line, "clip[0].cut", problem)
             .into());
     }
-    let (records, originals) = match layout {
-        Layout::Grid => (mocap::grid_records(spec, m, &mocap)?, Vec::new()),
+    let (records, originals, seams) = match layout {
+        Layout::Grid => (
+            mocap::grid_records(spec, m, &mocap)?,
+            Vec::new(),
+            Vec::new(),
+        ),
         Layout::Clips { .. } => mocap::clip_records(spec, m, &mocap)?,
     };
     let axes = spec
@@ -424,6 +431,7 @@ fn from_mocap(
         probe_axes,
         param_frame,
         originals,
+        seams,
         load_seconds: 0.0,
     })
 }

@@ -53,6 +53,9 @@
 //! frames = 32               # frames per phase
 //! looping = true            # one cyclic phase, seam-blended
 //! seam_window = 4           # frames blended at each end of a loop
+//! # seam_search = 12        # looping: move each end of a clip's cut up to this
+//!                           # many source frames, to the pair whose poses match
+//!                           # best (see `mocap::best_cut`); default 0: as given
 //!
 //! [resample]
 //! method = "auto"           # auto | idw | rbf | local-linear
@@ -337,6 +340,9 @@ pub fn glob(pattern: &str, name: &str) -> bool {
     rest.len() >= last.len() && rest.ends_with(last)
 }
 
+/// The farthest `[motion] seam_search` may move a cut end, source frames.
+pub const MAX_SEAM_SEARCH: usize = 240;
+
 /// Motion-table settings.
 #[derive(Debug, Clone, Copy)]
 pub struct MotionSpec {
@@ -346,6 +352,9 @@ pub struct MotionSpec {
     pub looping: bool,
     /// Seam-blend window, frames.
     pub seam_window: usize,
+    /// Looping: how far (source frames) each end of a clip's cut may move
+    /// to the pair of frames whose poses match best (0: as given).
+    pub seam_search: usize,
 }
 
 /// Resampling settings.
@@ -438,6 +447,7 @@ struct RawMotion {
     frames: Option<Spanned<usize>>,
     looping: Option<bool>,
     seam_window: Option<Spanned<usize>>,
+    seam_search: Option<Spanned<usize>>,
 }
 
 #[derive(Deserialize)]
@@ -1079,6 +1089,7 @@ impl Parser<'_> {
                 frames: 0,
                 looping: false,
                 seam_window: 0,
+                seam_search: 0,
             });
         }
         let r = m.map(Spanned::get_ref);
@@ -1105,10 +1116,25 @@ impl Parser<'_> {
             Some(w) => *w.get_ref(),
             None => (frames / 8).max(1),
         };
+        let seam_search = match r.and_then(|r| r.seam_search.as_ref()) {
+            Some(w) if !looping => {
+                return self.err(w.span(), "motion.seam_search", "needs looping = true");
+            }
+            Some(w) if *w.get_ref() > MAX_SEAM_SEARCH => {
+                return self.err(
+                    w.span(),
+                    "motion.seam_search",
+                    format!("must be at most {MAX_SEAM_SEARCH} frames"),
+                );
+            }
+            Some(w) => *w.get_ref(),
+            None => 0,
+        };
         Ok(MotionSpec {
             frames,
             looping,
             seam_window,
+            seam_search,
         })
     }
 

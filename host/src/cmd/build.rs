@@ -381,6 +381,20 @@ fn build_text(
             c.mean_rotation.to_degrees()
         );
     }
+    for seam in &data.seams {
+        let [a, b] = seam.given;
+        let [c, d] = seam.chosen;
+        let _ = writeln!(
+            s,
+            "  seam {}: cut {a}..{b} -> {c}..{d} (searched ±{} frames): joint jump at the seam {} -> {} (mean frame step {}); blended over {} frames at each end",
+            seam.clip,
+            seam.search,
+            mm(seam.jump_given),
+            mm(seam.jump_chosen),
+            mm(seam.step),
+            seam.window
+        );
+    }
     let [import, cv, grid, write] = r.seconds;
     let _ = writeln!(
         s,
@@ -419,6 +433,11 @@ fn build_json(b: &Built, data: &Dataset, out: &std::path::Path, total: f64) -> s
         "sample_bytes": marionette_core::table::SAMPLE_LEN,
         "quantization": r.quant,
         "reconstruction": r.reconstruction,
+        "seams": data.seams.iter().map(|m| json!({
+            "clip": m.clip, "given": m.given, "chosen": m.chosen, "search": m.search,
+            "window": m.window, "jump_given_m": m.jump_given, "jump_chosen_m": m.jump_chosen,
+            "step_m": m.step,
+        })).collect::<Vec<_>>(),
         "seconds": {
             "import": r.seconds[0], "cross_validation": r.seconds[1],
             "resampling": r.seconds[2], "writing": r.seconds[3], "total": total,
