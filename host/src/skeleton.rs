@@ -566,8 +566,8 @@ impl SkeletonRig {
              # - Conventions (docs/rig.md): metres, radians (`limits_deg` in degrees), Y up; a \
              joint's\n#   rotation is the product of its DOFs in the order listed. Lengths are \
              the file's\n#   times {scale} m per unit.\n\
-             # - dofs: the skeleton's rotation channels{exact}. EDIT the limits (generous \
-             here)\n#   to the joints' real ranges before solving for a puppet.\n\
+             # - dofs: the skeleton's rotation channels{exact}. EDIT the limits ({limits})\n\
+             #   to the joints' real ranges before solving for a puppet.\n\
              # - touch: where goals attach, the joint's first child (or End Site); EDIT for \
              hands and feet.\n\
              # - No [[servo]], [[param]] or [[goal]] yet: add them to drive a puppet \
@@ -580,6 +580,11 @@ impl SkeletonRig {
             n = self.segments.len(),
             d = self.dof_count(),
             scale = num(self.scale),
+            limits = if self.format == "BVH" {
+                "±180° here"
+            } else {
+                "the file's, ±180° where it gives none"
+            },
             exact = if self.format == "BVH" {
                 ", so every frame of its mocap is a pose of this rig"
             } else {

@@ -436,6 +436,29 @@ fn a_rig_from_a_bvh_skeleton_loads_passes_rig_check_and_solves() {
     let target = [rest[0], rest[1] + root_y + 0.2, rest[2] + 0.15];
     let d = solve_distance(dir.path(), &out, "RightHand", target);
     assert!(d < 1e-3, "RightHand {d} m from {target:?}");
+    // Its [retarget] map: a spec with `[rig] file` = the written rig builds
+    // a table from CMU walks of the same skeleton, for this rig (its hash).
+    let spec = dir.path().join("walk.toml");
+    let clip = |f: &str| s(&repo().join("data/cmu_16_walk_run").join(f)).to_owned();
+    std::fs::write(
+        &spec,
+        format!(
+            "kind = \"clips\"\n[mocap]\n[rig]\nfile = \"cmu.toml\"\n[[clip]]\nfile = \"{}\"\n\
+             cut = [121, 235]\n[[clip]]\nfile = \"{}\"\ncut = [19, 103]\n[[axis]]\n\
+             name = \"speed\"\nmeasure = \"speed\"\ncount = 2\n[motion]\nframes = 16\n\
+             looping = true\n",
+            clip("16_21.bvh"),
+            clip("16_45.bvh")
+        ),
+    )
+    .unwrap();
+    let table = dir.path().join("walk.bin");
+    ok(&marionette(&["build", s(&spec), "-o", s(&table)]));
+    let check: serde_json::Value =
+        serde_json::from_str(&ok(&marionette(&["rig", "check", s(&out), "--json"]))).unwrap();
+    let inspect: serde_json::Value =
+        serde_json::from_str(&ok(&marionette(&["inspect", s(&table), "--json"]))).unwrap();
+    assert_eq!(inspect["rig_hash"], check["hash"]);
 }
 
 #[test]

@@ -452,11 +452,7 @@ pub type ClipRecords = (Vec<Record>, Vec<Originals>, Vec<Seam>);
 
 /// Motion-table examples: one time-resampled clip each, each clip's
 /// normalized source frames, and for a loop each clip's seam.
-pub fn clip_records(
-    spec: &Spec,
-    m: &MocapSpec,
-    mocap: &Mocap,
-) -> Result<ClipRecords, BuildError> {
+pub fn clip_records(spec: &Spec, m: &MocapSpec, mocap: &Mocap) -> Result<ClipRecords, BuildError> {
     let segs = measure_segments(spec, &mocap.rig)?;
     let forward = DVec3::from_array(m.forward);
     let segments = mocap.rig.names.len();

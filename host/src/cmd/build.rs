@@ -1,6 +1,11 @@
 //! `marionette build SPEC -o tables.bin`: build a table blob from mocap or a
 //! JSON example set (see [`crate::build`]), print what was measured, and
 //! optionally measure held-out error (`--holdout CLIP|all`).
+//!
+//! A looping clip table reports each clip's seam (a `seam` line; `seams` in
+//! `--json`: `clip`, `given` and `chosen` cut `[first, last]`, `search`,
+//! `window`, `jump_given_m`, `jump_chosen_m`, `step_m`; see
+//! [`crate::build::mocap::Seam`]).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
