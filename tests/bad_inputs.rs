@@ -790,6 +790,31 @@ fn build_errors_name_the_spec_line_and_field_and_the_mocap_files_line() {
             vec!["rename = { L_ToeBaseShareBone = ".into()],
         ),
     ];
+    // Found while building: axes whose range holds no example.
+    let far = grid_spec(&data("hdm05_bk/HDM_bk.asf"), &amc_path)
+        .replace("count = 3", "count = 3\nmin = 5.0\nmax = 6.0")
+        .replace("[mocap]\n", "[mocap]\nevery = 8\n")
+        + "[resample]\nvalid_radius = 0.5\n";
+    let src = Source {
+        file: "spec.toml".into(),
+        text: far.clone(),
+    };
+    let spec = spec::parse(src, dir.path().to_path_buf()).unwrap();
+    let progress = build::Progress::new(false);
+    let loaded = build::load(&spec, &progress).unwrap();
+    let e = build::build(&spec, &loaded, None, &progress)
+        .unwrap_err()
+        .to_string();
+    let line = 1 + far
+        .lines()
+        .position(|l| l.starts_with("valid_radius"))
+        .unwrap();
+    assert!(
+        e.starts_with(&format!(
+            "spec.toml:{line}: resample.valid_radius: every grid cell"
+        )),
+        "{e}"
+    );
     let mut failures = Vec::new();
     for (what, text, start, needles) in &cases {
         let e = load_error(text, dir.path());

@@ -107,6 +107,14 @@ pub fn load(spec: &Spec, m: &MocapSpec, tick: &dyn Fn(&str)) -> Result<Mocap, Bu
         let frame_time = c.fps.or(m.fps).map_or(motion.frame_time, |f| 1.0 / f);
         let poses = retarget_all(&motion, &sk, rig).map_err(|e| match e {
             BuildError::Import(e) => at_clip(e),
+            BuildError::Pose { file, problem } => spec
+                .source
+                .error_line(
+                    c.line,
+                    &format!("clip[{i}].file"),
+                    format!("{file}: {problem}"),
+                )
+                .into(),
             other => other,
         })?;
         clips.push(Clip {

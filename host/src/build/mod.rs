@@ -583,6 +583,15 @@ pub fn build(
     let post = post(data, &spec.resample, &placed);
     let grid = resample::grid(&space, &records, method, radius, &post, &|| progress.tick());
     let t2 = Instant::now();
+    if !grid.valid.iter().any(|v| *v) {
+        let (line, field) = match (spec.resample.line, spec.axes.first()) {
+            (0, Some(a)) => (a.line, "axis[0]"),
+            (l, _) => (l, "resample.valid_radius"),
+        };
+        let problem =
+            "every grid cell is outside the data: widen `valid_radius` or move the axes' ranges";
+        return Err(spec.source.error_line(line, field, problem).into());
+    }
     let table = table_spec(data, &grid)?;
     let blob = blob::write(&table)?;
     let quant = measure::quantization(&table, &blob)?;
@@ -621,12 +630,6 @@ pub fn build(
 
 /// The writer's table from resampled values.
 fn table_spec(data: &Dataset, grid: &resample::Resampled) -> Result<TableSpec, BuildError> {
-    if !grid.valid.iter().any(|v| *v) {
-        return Err(BuildError::Data(
-            "every grid cell is outside the data: widen `valid_radius` or move the axes' ranges"
-                .to_owned(),
-        ));
-    }
     let n = data.segments.len();
     let f32_pose = |s: &[Seg]| -> Vec<(Vec3, Quat)> {
         s.iter().map(|(p, q)| (p.as_vec3(), q.as_quat())).collect()

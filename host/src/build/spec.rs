@@ -368,6 +368,9 @@ pub struct ResampleSpec {
     pub enforce_lengths: bool,
     /// Solve each resampled pose of a probe-position grid onto its grid point.
     pub place_probe: bool,
+    /// Line of `valid_radius` (of `[resample]` without one; 0 without
+    /// either), for errors found while building.
+    pub line: usize,
 }
 
 #[derive(Deserialize)]
@@ -1166,9 +1169,15 @@ impl Parser<'_> {
             }
             v => v.map(|v| *v.get_ref()),
         };
+        let line = match (g.and_then(|g| g.valid_radius.as_ref()), r) {
+            (Some(v), _) => self.line(&v.span()),
+            (None, Some(r)) => self.line(&r.span()),
+            (None, None) => 0,
+        };
         Ok(ResampleSpec {
             method,
             valid_radius,
+            line,
             enforce_lengths: g.and_then(|g| g.enforce_lengths).unwrap_or(true),
             place_probe: g.and_then(|g| g.place_probe).unwrap_or(true),
         })
