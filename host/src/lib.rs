@@ -17,6 +17,7 @@ pub mod link;
 pub mod live;
 pub mod locate;
 pub mod perform;
+pub mod progress;
 pub mod qemu;
 pub mod refusal;
 pub mod render;

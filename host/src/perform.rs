@@ -846,9 +846,19 @@ pub fn emulate(
         return Ok((run, Vec::new()));
     }
     if arm_accepted(&emulator.replies_so_far()) {
-        pace(frames_part, pacing, |bytes| emulator.send(bytes))?;
+        let progress = crate::progress::Progress::new(true);
+        progress.stage("emulated board: servo frames", frames);
+        let per_frame = format.bytes_for(1).max(1);
+        pace(frames_part, pacing, |bytes| {
+            emulator.send(bytes)?;
+            progress.set(emulator.servo_bytes() / per_frame);
+            Ok::<(), qemu::QemuError>(())
+        })?;
         // Let the board finish the frames before it is told to stop.
-        emulator.wait_servo_bytes(format.bytes_for(frames))?;
+        emulator.wait_servo_bytes_with(format.bytes_for(frames), &|got| {
+            progress.set(got / per_frame);
+        })?;
+        progress.finish();
         std::thread::sleep(pause);
     }
     for sent in last {

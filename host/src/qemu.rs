@@ -268,7 +268,22 @@ impl Emulator {
     /// Waits until the board has sent at least `n` bytes on the servo bus, or
     /// has exited.
     pub fn wait_servo_bytes(&mut self, n: usize) -> Result<(), QemuError> {
-        while self.servo_out.len() < n {
+        self.wait_servo_bytes_with(n, &|_| ())
+    }
+
+    /// As [`Emulator::wait_servo_bytes`], telling `seen` how many bytes have
+    /// come so far each time it looks.
+    pub fn wait_servo_bytes_with(
+        &mut self,
+        n: usize,
+        seen: &dyn Fn(usize),
+    ) -> Result<(), QemuError> {
+        loop {
+            let got = self.servo_out.len();
+            seen(got);
+            if got >= n {
+                break;
+            }
             self.remaining()?;
             if self.child.try_wait()?.is_some() {
                 break;
@@ -276,6 +291,12 @@ impl Emulator {
             thread::sleep(Duration::from_millis(1));
         }
         Ok(())
+    }
+
+    /// How many bytes the board has sent on the servo bus so far.
+    #[must_use]
+    pub fn servo_bytes(&self) -> usize {
+        self.servo_out.len()
     }
 
     /// Waits until the bytes the board has sent on its tracker link (its

@@ -197,45 +197,7 @@ pub struct Dataset {
     pub warnings: Vec<String>,
 }
 
-/// Progress reporting (an indicatif bar on a terminal, nothing otherwise).
-pub struct Progress {
-    bar: indicatif::ProgressBar,
-}
-
-impl Progress {
-    /// A bar on stderr, hidden unless `show` and stderr is a terminal.
-    #[must_use]
-    pub fn new(show: bool) -> Self {
-        let bar = if show {
-            indicatif::ProgressBar::new(0)
-        } else {
-            indicatif::ProgressBar::hidden()
-        };
-        if let Ok(style) =
-            indicatif::ProgressStyle::with_template("{msg:>28} [{bar:40}] {pos}/{len} {elapsed}")
-        {
-            bar.set_style(style.progress_chars("=> "));
-        }
-        Self { bar }
-    }
-
-    /// Starts a stage of `len` steps.
-    pub fn stage(&self, msg: &str, len: usize) {
-        self.bar.set_message(msg.to_owned());
-        self.bar.set_length(len as u64);
-        self.bar.set_position(0);
-    }
-
-    /// One step done.
-    pub fn tick(&self) {
-        self.bar.inc(1);
-    }
-
-    /// Clears the bar.
-    pub fn finish(&self) {
-        self.bar.finish_and_clear();
-    }
-}
+pub use crate::progress::Progress;
 
 /// Loads the examples of a spec.
 pub fn load(spec: &Spec, progress: &Progress) -> Result<Dataset, BuildError> {

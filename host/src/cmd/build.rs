@@ -159,7 +159,12 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         let groups = holdout_groups(&data, which)?;
         let rows = groups
             .iter()
-            .map(|&g| measure::holdout(&spec, &data, g, &progress))
+            .enumerate()
+            .map(|(k, &g)| {
+                let name = &data.groups[g];
+                progress.set_prefix(&format!("hold-out {}/{} ({name}): ", k + 1, groups.len()));
+                measure::holdout(&spec, &data, g, &progress)
+            })
             .collect::<Result<Vec<_>, _>>()?;
         progress.finish();
         if args.json {

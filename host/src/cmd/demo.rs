@@ -84,12 +84,18 @@ pub fn repo_path(p: &Path) -> PathBuf {
 /// Builds the table of a spec (no progress bar), checking first that the
 /// emulated board's table region can hold it.
 pub fn build_table(spec_path: &Path) -> Result<Built, CmdError> {
+    build_table_with(spec_path, &Progress::new(false))
+}
+
+/// As [`build_table`], reporting its stages on `progress`.
+pub fn build_table_with(spec_path: &Path, progress: &Progress) -> Result<Built, CmdError> {
     let spec = spec::read(spec_path)?;
     crate::capacity::check_spec(&spec, Some(&board::EMULATED))?;
-    let progress = Progress::new(false);
-    let data = build::load(&spec, &progress)?;
+    let data = build::load(&spec, progress)?;
     crate::capacity::check_dataset(&spec, &data, Some(&board::EMULATED))?;
-    Ok(build::build(&spec, &data, None, &progress)?)
+    let built = build::build(&spec, &data, None, progress)?;
+    progress.finish();
+    Ok(built)
 }
 
 /// The region image and session of a rig file, a table blob and a recording.
@@ -396,7 +402,7 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     let start = Instant::now();
     let (spec_path, rig_path) = (repo_path(&args.spec), repo_path(&args.rig));
     let recording = repo_path(&args.recording);
-    let built = build_table(&spec_path)?;
+    let built = build_table_with(&spec_path, &Progress::new(true))?;
     let build_seconds = start.elapsed().as_secs_f64();
     // Named for the spec it was built from (`reach_humanoid16.toml` ->
     // `reach_humanoid16.bin`).

@@ -27,6 +27,7 @@ use super::CmdError;
 use crate::import::csv::TrackerSample;
 use crate::link::Link;
 use crate::perform::{self, Framing};
+use crate::refusal::Stop;
 use crate::sender::{Counts, Sender};
 use crate::{import, rigfile};
 use marionette_core::wire::{CommandKind, FrameTiming, Message, State, StatusReason, TrackerFrame};
@@ -228,26 +229,34 @@ pub fn handshake(
             break st;
         }
         if Instant::now() > deadline {
-            return Err(format!(
-                "{port}: no answer from the board in {limit:?}: check the port, the baud rate, \
-                 and that the board runs Marionette's firmware"
-            )
-            .into());
+            return Err(Box::new(Stop::fault(
+                format!("the board on {port}"),
+                format!(
+                    "no answer from the board in {limit:?}: check the port, the baud rate, \
+                     and that the board runs Marionette's firmware"
+                ),
+            )));
         }
     };
     if status.reason != StatusReason::Ok || !status.table_ok {
-        let (what, todo) = crate::refusal::explain(status.reason);
-        return Err(format!(
-            "the board cannot arm ({:?}): {what}; to fix: {todo}",
+        let reason = if status.reason == StatusReason::Ok {
+            StatusReason::NoTable
+        } else {
             status.reason
-        )
-        .into());
+        };
+        return Err(Box::new(Stop::refused(
+            format!("the board on {port}"),
+            reason,
+            &[],
+            None,
+        )));
     }
     Ok(())
 }
 
-/// Arms the board; errors if it refuses.
-pub fn arm(sender: &Sender, replies: &Replies) -> Result<(), CmdError> {
+/// Arms the board; a refusal is a [`Stop`] with the board's `Status`
+/// reason (asked for again after the refused `Ack`).
+pub fn arm(sender: &Sender, replies: &Replies, port: &str) -> Result<(), CmdError> {
     sender.command(CommandKind::Arm);
     let ack = replies.wait_for(Duration::from_secs(2), |m| match m {
         Message::Ack(a) if a.seq == 0 => Some(a.ok),
@@ -255,8 +264,24 @@ pub fn arm(sender: &Sender, replies: &Replies) -> Result<(), CmdError> {
     });
     match ack {
         Some(true) => Ok(()),
-        Some(false) => Err("the board refused Arm: ask marionette stream's Status reason".into()),
-        None => Err("the board did not acknowledge Arm within 2 s".into()),
+        Some(false) => {
+            sender.hello();
+            let reason = replies.wait_for(Duration::from_secs(1), |m| match m {
+                Message::Status(st) if st.reason != StatusReason::Ok => Some(st.reason),
+                _ => None,
+            });
+            Err(Box::new(match reason {
+                Some(reason) => Stop::refused(format!("the board on {port}"), reason, &[], None),
+                None => Stop::fault(
+                    format!("the board on {port}"),
+                    "it refused Arm but its Status names no reason",
+                ),
+            }))
+        }
+        None => Err(Box::new(Stop::fault(
+            format!("the board on {port}"),
+            "the board did not acknowledge Arm within 2 s",
+        ))),
     }
 }
 
@@ -322,7 +347,8 @@ pub fn write_sent(path: &Path, frames: &[TrackerFrame]) -> Result<(), CmdError> 
 
 /// Streams the recording to the board and reports what happened.
 pub fn run(args: &Args) -> Result<(), CmdError> {
-    let (summary, _) = stream(args)?;
+    let (summary, _) =
+        stream(args).inspect_err(|e| crate::refusal::print_json_stop(&**e, args.json))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
@@ -347,7 +373,7 @@ pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
     let link = Link::Uart { baud: args.baud };
     let sender = Sender::spawn(port, link, args.frame);
     handshake(&sender, &replies, &args.port, Duration::from_secs(5))?;
-    arm(&sender, &replies)?;
+    arm(&sender, &replies, &args.port)?;
     let seconds = schedule(&sender, &frames, args.fast);
     sender.drain(Duration::from_secs(2));
     sender.command(CommandKind::Disarm);
