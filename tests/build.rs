@@ -755,24 +755,25 @@ fn iclone_walks_build_onto_a_renamed_pruned_rig() {
 }
 
 /// Per-joint steps between the stored frames of a looping table at
-/// `params`, the cycle's root travel added back (frame `i` of `K` stands
-/// `travel · i / K` further on): step `i` is the mean over segments of
-/// `|p(i+1) − p(i) + travel / K|`, for `i` in `0..K`; frame `K` is the next
-/// cycle's frame 0, so step `K − 1` crosses the seam.
+/// `params`, the cycle's root travel added back (frame `i` of the `K`
+/// stored ones stands `travel · i / K` further on, and the next cycle's
+/// frame 0 a whole `travel` on): step `i` is the mean over segments of
+/// `|p((i + 1) mod K) − p(i) + travel / K|`, for `i` in `0..K`; step
+/// `K − 1` crosses the seam.
 fn loop_steps(table: &Table, params: &[f32]) -> Vec<f64> {
     let (frames, s) = query::frames(table, params).unwrap();
-    let k = frames.len() - 1;
+    let k = frames.len();
     let t = s.travel.expect("a looping table");
     let per = glam::Vec3::from_array(t) / k as f32;
-    frames
-        .windows(2)
-        .map(|w| {
-            let sum: f64 = w[0]
+    (0..k)
+        .map(|i| {
+            let (a, b) = (&frames[i], &frames[(i + 1) % k]);
+            let sum: f64 = a
                 .iter()
-                .zip(&w[1])
+                .zip(b)
                 .map(|(a, b)| f64::from((b.0 - a.0 + per).length()))
                 .sum();
-            sum / w[0].len() as f64
+            sum / a.len() as f64
         })
         .collect()
 }
