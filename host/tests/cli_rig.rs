@@ -585,7 +585,7 @@ fn bad_skeleton_files_are_named_with_their_line() {
 }
 
 #[test]
-fn rig_check_still_needs_its_argument_and_rig_alone_says_what_to_give() {
+fn rig_alone_says_what_to_give() {
     let o = marionette(&["rig"]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--from-skeleton"));
