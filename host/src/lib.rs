@@ -24,5 +24,6 @@ pub mod render;
 pub mod rigfile;
 pub mod save;
 pub mod sender;
+pub mod skeleton;
 #[cfg(feature = "view")]
 pub mod view;

@@ -50,7 +50,7 @@ enum Command {
     Record(cmd::record::Args),
     /// Find a servo's limits from the keyboard on a board (or the emulated one) and write them into the rig file.
     Calibrate(cmd::calibrate::Args),
-    /// Check a rig file: summary, hash, which boards can drive it, likely slips.
+    /// Check a rig file (summary, hash, which boards can drive it, likely slips), or write one from a mocap skeleton (`--from-skeleton`).
     Rig(cmd::rig::Args),
     /// Perform from a live source (VMC / OSC over UDP) on the emulated or a real board.
     Live(cmd::live::Args),

@@ -188,6 +188,8 @@ pub struct Dataset {
     pub param_frame: mocap::Frame,
     /// Clip tables: each group's normalized source frames with their phases.
     pub originals: Vec<mocap::Originals>,
+    /// Looping clip tables: each clip's seam (the cut given and used).
+    pub seams: Vec<mocap::Seam>,
     /// Seconds spent importing.
     pub load_seconds: f64,
     /// Import warnings (a clip whose frame rate looks wrong), each naming
@@ -284,6 +286,7 @@ fn from_examples(set: &examples::ExampleSet) -> Dataset {
         probe_axes: None,
         param_frame: mocap::Frame::WORLD,
         originals: Vec::new(),
+        seams: Vec::new(),
         load_seconds: 0.0,
         warnings: Vec::new(),
     }
@@ -315,8 +318,12 @@ fn from_mocap(
             .error_line(m.clips[0].line, "clip[0].cut", problem)
             .into());
     }
-    let (records, originals) = match layout {
-        Layout::Grid => (mocap::grid_records(spec, m, &mocap)?, Vec::new()),
+    let (records, originals, seams) = match layout {
+        Layout::Grid => (
+            mocap::grid_records(spec, m, &mocap)?,
+            Vec::new(),
+            Vec::new(),
+        ),
         Layout::Clips { .. } => mocap::clip_records(spec, m, &mocap)?,
     };
     let axes = spec
@@ -386,6 +393,7 @@ fn from_mocap(
         probe_axes,
         param_frame,
         originals,
+        seams,
         load_seconds: 0.0,
     })
 }
@@ -537,6 +545,15 @@ pub fn build(
     let post = post(data, &spec.resample, &placed);
     let grid = resample::grid(&space, &records, method, radius, &post, &|| progress.tick());
     let t2 = Instant::now();
+    if !grid.valid.iter().any(|v| *v) {
+        let (line, field) = match (spec.resample.line, spec.axes.first()) {
+            (0, Some(a)) => (a.line, "axis[0]"),
+            (l, _) => (l, "resample.valid_radius"),
+        };
+        let problem =
+            "every grid cell is outside the data: widen `valid_radius` or move the axes' ranges";
+        return Err(spec.source.error_line(line, field, problem).into());
+    }
     let table = table_spec(data, &grid)?;
     let blob = blob::write(&table)?;
     let quant = measure::quantization(&table, &blob)?;
@@ -575,12 +592,6 @@ pub fn build(
 
 /// The writer's table from resampled values.
 fn table_spec(data: &Dataset, grid: &resample::Resampled) -> Result<TableSpec, BuildError> {
-    if !grid.valid.iter().any(|v| *v) {
-        return Err(BuildError::Data(
-            "every grid cell is outside the data: widen `valid_radius` or move the axes' ranges"
-                .to_owned(),
-        ));
-    }
     let n = data.segments.len();
     let f32_pose = |s: &[Seg]| -> Vec<(Vec3, Quat)> {
         s.iter().map(|(p, q)| (p.as_vec3(), q.as_quat())).collect()
