@@ -64,6 +64,129 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+    /// Perform two layers ([`layered_region`]): the walk table of
+    /// `--walk-spec` on the legs (its speed ramping from the table's slowest
+    /// to its fastest over the take) while the right arm follows the tracked
+    /// hand with the reach table of `--spec` (plus the solve).
+    #[arg(long)]
+    pub layers: bool,
+    /// The walk (clip) table's build spec, for `--layers`.
+    #[arg(long, default_value = "data/builds/walk_humanoid16.toml")]
+    pub walk_spec: PathBuf,
+}
+
+/// Segments each layer of `demo --layers` owns, with their mask weight
+/// (255 = 1). Walk: the legs and the left arm's swing, the torso; the
+/// pelvis stays at rest (the puppet is on a stand, and the walk's travel is
+/// dropped). Reach: the right arm, and half of the torso and the head over
+/// the walk's.
+pub const DEMO_MASKS: [(&str, &[(&str, u8)]); 2] = [
+    (
+        "walk",
+        &[
+            ("torso", 255),
+            ("head", 255),
+            ("l_upper_arm", 255),
+            ("l_forearm", 255),
+            ("l_thigh", 255),
+            ("l_shin", 255),
+            ("l_foot", 255),
+            ("r_thigh", 255),
+            ("r_shin", 255),
+            ("r_foot", 255),
+        ],
+    ),
+    (
+        "reach",
+        &[
+            ("torso", 128),
+            ("head", 128),
+            ("r_upper_arm", 255),
+            ("r_forearm", 255),
+        ],
+    ),
+];
+
+/// A layer mask over `segments` from `(name, weight)` pairs (others 0).
+fn mask(segments: &[String], owned: &[(&str, u8)]) -> Result<Vec<u8>, CmdError> {
+    let mut m = vec![0u8; segments.len()];
+    for (name, w) in owned {
+        let i = segments
+            .iter()
+            .position(|s| s == name)
+            .ok_or_else(|| format!("demo --layers: the rig has no segment `{name}`"))?;
+        m[i] = *w;
+    }
+    Ok(m)
+}
+
+/// The region of `demo --layers`: the rig, table 0 the reach grid
+/// (`reach_blob`, parameters the rig's 0-2, the tracked right hand), table 1
+/// the walk clips (`walk_blob`), and the layer list: layer 0 the walk
+/// (speed ramping from the table's slowest to its fastest over
+/// `ramp_seconds`, root travel dropped, 0.25 s cross-fade), layer 1 the
+/// reach over it ([`DEMO_MASKS`]).
+pub fn layered_region(
+    rig: &rigfile::RigFile,
+    reach_blob: &[u8],
+    walk_blob: &[u8],
+    ramp_seconds: f32,
+) -> Result<Vec<u8>, CmdError> {
+    use marionette_core::layer::{Layer, Layers, Root, Source};
+    use marionette_core::region::{self, Entry};
+    let rig_blob = rigfile::to_blob(rig)?;
+    let walk = marionette_core::table::Table::parse(walk_blob)
+        .map_err(|e| format!("the walk table: {e}"))?;
+    let [speed] = walk.param_axes() else {
+        return Err("demo --layers: the walk table must have one parameter axis (speed)".into());
+    };
+    let fastest = speed.min + speed.step * f32::from(speed.count.saturating_sub(1));
+    let segments = rig.segment_names();
+    let masks = [
+        mask(segments, DEMO_MASKS[0].1)?,
+        mask(segments, DEMO_MASKS[1].1)?,
+    ];
+    let none = [Source::Const(0.0); marionette_core::table::MAX_AXES];
+    let mut walk_axes = none;
+    walk_axes[0] = Source::Ramp {
+        from: speed.min,
+        to: fastest,
+        seconds: ramp_seconds,
+    };
+    let mut reach_axes = none;
+    reach_axes[..3].copy_from_slice(&[Source::Param(0), Source::Param(1), Source::Param(2)]);
+    let layers = [
+        Layer {
+            table: 1,
+            root: Root::Drop,
+            fade_s: 0.25,
+            weight: Source::Const(1.0),
+            axes: walk_axes,
+            axis_count: 1,
+            mask: &masks[0],
+        },
+        Layer {
+            table: 0,
+            root: Root::Drop,
+            fade_s: 0.25,
+            weight: Source::Const(1.0),
+            axes: reach_axes,
+            axis_count: 3,
+            mask: &masks[1],
+        },
+    ];
+    let mut list = vec![0u8; marionette_core::layer::len(layers.len(), segments.len())];
+    Layers::write(&layers, segments.len(), &mut list).map_err(|e| e.to_string())?;
+    let entries = [
+        Entry::rig(&rig_blob),
+        Entry::table(reach_blob),
+        Entry::table(walk_blob),
+        Entry::layers(&list),
+    ];
+    let mut out = vec![0u8; region::len(&entries).map_err(|e| e.to_string())?];
+    let n = region::write(&entries, &mut out).map_err(|e| e.to_string())?;
+    out.truncate(n);
+    Ok(out)
 }
 
 /// A path as given if it exists, else the file of that repository path
