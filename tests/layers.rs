@@ -732,3 +732,48 @@ fn a_live_layer_weight_cross_fades_over_its_stated_time() {
     assert_eq!(t.angles[0], t.angles[850]);
     assert_ne!(t.angles[400], t.angles[0]);
 }
+
+// ---------------------------------------------------------------------------
+// `marionette demo --layers` on the emulated board.
+
+#[test]
+fn demo_layers_runs_on_the_emulated_board_bit_for_bit_with_the_native_core() {
+    let p = puppet();
+    let rig_path = repo().join("rigs/humanoid16.toml");
+    let recording = repo().join("data/recordings/reach_hdm05_007.csv");
+    let mut inputs = demo::inputs(&rig_path, &p.reach, &recording).unwrap();
+    let seconds = demo::make_layered(&mut inputs, &rig_path, &p.reach, &p.walk).unwrap();
+    assert!(
+        (seconds - 2.133).abs() < 1e-3,
+        "the ramp spans the take: {seconds}"
+    );
+    let r = Region::parse(&inputs.region);
+    assert_eq!(r.reason, StatusReason::Ok);
+    assert_eq!(r.layers.map(|l| l.as_slice().len()), Some(2));
+
+    // Natively: every frame performed, the walk moves the legs (the feet's
+    // goals are off), the right hand follows its tracker.
+    let native = perform::simulate(&inputs.region, &inputs.session).unwrap();
+    assert_eq!(native.frame_targets.len(), inputs.frames);
+    let span = |ch: usize| {
+        let v: Vec<u16> = native.frame_targets.iter().map(|t| t[ch]).collect();
+        v.iter().max().unwrap() - v.iter().min().unwrap()
+    };
+    // l_thigh.x (8), r_thigh.x (12): over 200 µs (×4 quarter units) of swing.
+    assert!(span(8) > 800 && span(12) > 800, "{} {}", span(8), span(12));
+    assert!(span(5) > 800, "the right arm reaches: {}", span(5));
+
+    let out = tempfile::tempdir().unwrap();
+    let compared = marionette_host::cmd::emulate::compare(
+        &inputs,
+        out.path(),
+        perform::Pacing::AsFastAsPossible,
+    )
+    .unwrap();
+    assert!(compared.stop.is_none(), "{:?}", compared.stop);
+    assert_eq!(compared.summary.frame_outputs, inputs.frames);
+    assert_eq!(
+        compared.summary.mismatches, 0,
+        "board and native core differ"
+    );
+}

@@ -377,6 +377,27 @@ pub struct LayerInfo {
     pub mask: Vec<(String, f64)>,
 }
 
+/// Turns the demo's `inputs` (of [`inputs`]) into those of `demo --layers`:
+/// the region becomes [`layered_region`] with the walk speed ramping over
+/// the take, and the session switches the goals of [`DEMO_GOALS_OFF`] off.
+/// Returns the ramp's length, seconds.
+pub fn make_layered(
+    inputs: &mut Inputs,
+    rig_path: &Path,
+    reach_blob: &[u8],
+    walk_blob: &[u8],
+) -> Result<f32, CmdError> {
+    let rig = rigfile::load(&rigfile::resolve(rig_path))?;
+    let span_us = match (inputs.times.first(), inputs.times.last()) {
+        (Some(a), Some(b)) => b.wrapping_sub(*a),
+        _ => 0,
+    };
+    let seconds = (span_us as f32 * 1e-6).max(0.1);
+    inputs.region = layered_region(&rig, reach_blob, walk_blob, seconds)?;
+    goals_off(&rig.desc(), &DEMO_GOALS_OFF, &mut inputs.session)?;
+    Ok(seconds)
+}
+
 /// Builds the walk table and replaces the region of `inputs` by the
 /// layered one ([`layered_region`]), the speed ramping over the take.
 fn use_layers(
@@ -395,14 +416,7 @@ fn use_layers(
         &walk.blob,
         &[("the spec", walk_spec.as_path())],
     )?;
-    let rig = rigfile::load(&rigfile::resolve(rig_path))?;
-    let span_us = match (inputs.times.first(), inputs.times.last()) {
-        (Some(a), Some(b)) => b.wrapping_sub(*a),
-        _ => 0,
-    };
-    let seconds = (span_us as f32 * 1e-6).max(0.1);
-    inputs.region = layered_region(&rig, reach_blob, &walk.blob, seconds)?;
-    goals_off(&rig.desc(), &DEMO_GOALS_OFF, &mut inputs.session)?;
+    let seconds = make_layered(inputs, rig_path, reach_blob, &walk.blob)?;
     let table = marionette_core::table::Table::parse(&walk.blob)
         .map_err(|e| format!("the walk table: {e}"))?;
     let speed = table
