@@ -141,13 +141,15 @@ pub fn bench_region() -> Result<Vec<u8>, IcountError> {
     ];
     let table = perform::rest_grid(&rig, &axes).map_err(|e| IcountError::Region(e.to_string()))?;
     let layered = layered_bench_region(&rig, &table)?;
+    // The nested region before the table, so that the table stays the
+    // region's last blob.
     let entries = [
         region::Entry::rig(&blob),
-        region::Entry::table(&table),
         region::Entry {
             kind: region::EntryKind::NESTED,
             bytes: &layered,
         },
+        region::Entry::table(&table),
     ];
     let mut out = vec![0u8; region::len(&entries).map_err(|e| IcountError::Region(e.to_string()))?];
     let n = region::write(&entries, &mut out).map_err(|e| IcountError::Region(e.to_string()))?;
