@@ -3,7 +3,7 @@
 //! body's degrees of freedom would allow one or more separate interpolation
 //! synthesis processes to operate at once").
 //!
-//! A region may carry a *layer list* (region entry kind 3, [`EntryKind`]):
+//! A region may carry a *layer list* (region entry kind 3, [`EntryKind::LAYERS`](crate::region::EntryKind::LAYERS)):
 //! up to [`MAX_LAYERS`] layers, each naming
 //!
 //! - its **table** (the `n`-th table entry of the region: a static grid, or a
