@@ -15,6 +15,7 @@ use marionette_core::solve::SolverState;
 use marionette_core::table::{Kind, MAX_AXES, Table};
 use marionette_core::wire::{Command, CommandKind, List, Message, Params, StatusReason};
 use marionette_host::cmd::demo;
+use marionette_host::flash::{self, BLACKPILL};
 use marionette_host::import::csv::read_tracker_csv;
 use marionette_host::perform::{self, Sent};
 use marionette_host::rigfile::{self, RigFile};
@@ -315,6 +316,10 @@ fn the_demo_region_arms_and_a_failing_layer_table_is_refused_with_a_reason() {
     assert_eq!(r.layer_tables[1].unwrap().kind(), Kind::Grid);
     let mut solver = SolverState::new();
     assert_eq!(Performer::new(&r, &mut solver).reason(), StatusReason::Ok);
+    // `marionette flash` checks it as the board reads it.
+    let armed = flash::check_region(&BLACKPILL, &good).unwrap();
+    assert_eq!((armed.layers, armed.grid.clone()), (2, vec![2, 64]));
+    assert!(armed.to_string().contains("2 layers"), "{armed}");
 
     let segments = p.rig.segment_names().len();
     let mask = vec![255u8; segments];
@@ -355,15 +360,20 @@ fn the_demo_region_arms_and_a_failing_layer_table_is_refused_with_a_reason() {
     // The walk table damaged: its CRC.
     let mut bad = p.walk.clone();
     bad[40] ^= 0x20;
-    assert_eq!(
-        refused(&[
-            rig,
-            Entry::table(&p.reach),
-            Entry::table(&bad),
-            Entry::layers(&l)
-        ]),
-        (StatusReason::BadCrc, Some(1), false)
-    );
+    let damaged = [
+        rig,
+        Entry::table(&p.reach),
+        Entry::table(&bad),
+        Entry::layers(&l),
+    ];
+    assert_eq!(refused(&damaged), (StatusReason::BadCrc, Some(1), false));
+    match flash::check_region(&BLACKPILL, &region_of(&damaged)) {
+        Err(flash::FlashError::WouldNotArm { reason, why }) => {
+            assert_eq!(reason, StatusReason::BadCrc);
+            assert!(why.contains("layer 1"), "{why}");
+        }
+        other => panic!("not refused: {other:?}"),
+    }
     // Layer 1's table missing.
     assert_eq!(
         refused(&[rig, Entry::table(&p.reach), Entry::layers(&l)]),
