@@ -386,8 +386,10 @@ pub struct Armed {
     pub servos: usize,
     /// Its servo back-end, as the rig file names it.
     pub output: &'static str,
-    /// Table 0's grid, samples per axis.
+    /// Table 0's grid, samples per axis (with layers: layer 0's table's).
     pub grid: Vec<u16>,
+    /// Layers the region performs (0: table 0 alone).
+    pub layers: usize,
 }
 
 impl fmt::Display for Armed {
@@ -398,14 +400,19 @@ impl fmt::Display for Armed {
             RegionLayout::Unknown => "unknown layout".to_string(),
         };
         let grid: Vec<String> = self.grid.iter().map(u16::to_string).collect();
+        let tables = if self.layers == 0 {
+            format!("table 0 a {} grid", grid.join("×"))
+        } else {
+            format!(
+                "{} layers, layer 0's table a {} grid",
+                self.layers,
+                grid.join("×")
+            )
+        };
         write!(
             f,
-            "{layout}: rig `{}` ({} segments, {} servos on {}), table 0 a {} grid: the board arms",
-            self.rig,
-            self.segments,
-            self.servos,
-            self.output,
-            grid.join("×")
+            "{layout}: rig `{}` ({} segments, {} servos on {}), {tables}: the board arms",
+            self.rig, self.segments, self.servos, self.output,
         )
     }
 }
@@ -432,11 +439,15 @@ pub fn check_region(layout: &Layout, bytes: &[u8]) -> Result<Armed, FlashError> 
     }
     let image = board_image(layout, bytes);
     let region = region::Region::<FIRMWARE_SEGMENTS>::parse_sized(&image);
-    let (Some(rig), Some(table), StatusReason::Ok) = (&region.rig, &region.table, region.reason)
-    else {
+    let layers = region.layers.map_or(0, |l| l.as_slice().len());
+    let first = region.table.as_ref().or(region.layer_tables[0].as_ref());
+    let (Some(rig), Some(table), StatusReason::Ok) = (&region.rig, first, region.reason) else {
         return Err(FlashError::WouldNotArm {
             reason: region.reason,
-            why: explain(&image),
+            why: match region.refused_layer {
+                Some(i) => format!("layer {i}'s table is refused ({:?})", region.reason),
+                None => explain(&image),
+            },
         });
     };
     layout
@@ -453,6 +464,7 @@ pub fn check_region(layout: &Layout, bytes: &[u8]) -> Result<Armed, FlashError> 
         servos: rig.servos().len(),
         output: support::kind_name(&rig.output()),
         grid: table.axes().iter().map(|a| a.count).collect(),
+        layers,
     })
 }
 
