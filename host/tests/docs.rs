@@ -63,7 +63,8 @@ fn every_page_is_listed_and_every_page_has_examples() {
             "goals.md",
             "recording.md",
             "rig.md",
-            "spec.md"
+            "spec.md",
+            "view.md"
         ]
     );
     for p in &pages {
@@ -188,3 +189,42 @@ fn the_recording_example_is_read() {
         assert_eq!(samples.len(), 4);
     }
 }
+
+#[cfg(feature = "view")]
+#[test]
+fn the_view_event_example_is_a_snapshot() {
+    use marionette_host::view::scene::Snapshot;
+    for block in of("view.md", "json") {
+        let s: Snapshot = serde_json::from_str(&block).expect("docs/view.md's example");
+        assert_eq!(s.bones.len(), s.sides.len());
+        // And back: the same keys (the numbers are f32 on the way).
+        let again = serde_json::to_value(&s).unwrap();
+        let given: serde_json::Value = serde_json::from_str(&block).unwrap();
+        assert_eq!(key_paths(&again, ""), key_paths(&given, ""));
+    }
+}
+
+/// Every object key of a JSON value, as paths (`link.state`).
+#[cfg(feature = "view")]
+fn key_paths(v: &serde_json::Value, at: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                let path = format!("{at}.{k}");
+                out.extend(key_paths(x, &path));
+                out.push(path);
+            }
+        }
+        serde_json::Value::Array(items) => {
+            for x in items {
+                out.extend(key_paths(x, &format!("{at}[]")));
+            }
+        }
+        _ => {}
+    }
+    out.sort();
+    out.dedup();
+    out
+}
+

@@ -16,10 +16,11 @@ use marionette_core::body::Angles;
 use marionette_core::pose::{LocalPose, MAX_SEGMENTS, Pose};
 use marionette_core::rig::Rig;
 use marionette_core::wire::{State, TrackerFrame};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// One servo's bar: its target within its calibrated pulse range.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ServoBar {
     /// The joint it drives (`r_elbow.x`).
     pub name: String,
@@ -34,7 +35,8 @@ pub struct ServoBar {
 }
 
 /// A goal: where it wants its point, and how far the point is.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct GoalView {
     /// The goal's label (segment and weight).
     pub name: String,
@@ -47,7 +49,8 @@ pub struct GoalView {
 }
 
 /// The link and the board's state.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct LinkView {
     /// Tracker frames sent so far.
     pub frames: u64,
@@ -66,7 +69,8 @@ pub struct LinkView {
 }
 
 /// One update of the page.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Snapshot {
     /// The page's caption (rig and source).
     pub title: String,
