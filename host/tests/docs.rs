@@ -227,4 +227,3 @@ fn key_paths(v: &serde_json::Value, at: &str) -> Vec<String> {
     out.dedup();
     out
 }
-

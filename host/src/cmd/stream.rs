@@ -69,6 +69,9 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+    /// The live view (`--view`, `--listen`), from the board's telemetry.
+    #[command(flatten)]
+    pub view: super::view::ViewArgs,
 }
 
 /// What a stream did, and what the board answered.
@@ -177,6 +180,18 @@ impl Replies {
             stop,
             thread: Some(thread),
         }
+    }
+
+    /// The messages in the last `bytes` bytes received (the first may be
+    /// cut: it is skipped).
+    #[must_use]
+    pub fn recent(&self, bytes: usize) -> Vec<Message> {
+        let tail = self
+            .bytes
+            .lock()
+            .map(|v| v[v.len().saturating_sub(bytes)..].to_vec())
+            .unwrap_or_default();
+        perform::decode_replies(&tail)
     }
 
     /// The messages received so far.
@@ -302,10 +317,10 @@ pub fn await_disarm(replies: &Replies, limit: Duration) -> bool {
 
 /// Offers each frame at its recorded time (or, `fast`, as soon as the
 /// last one went); returns the seconds it took.
-fn schedule(sender: &Sender, frames: &[TrackerFrame], fast: bool) -> f64 {
+fn schedule(sender: &Sender, frames: &[TrackerFrame], fast: bool, after: &dyn Fn(usize)) -> f64 {
     let start = Instant::now();
     let first = frames.first().map_or(0, |f| f.time_us);
-    for f in frames {
+    for (i, f) in frames.iter().enumerate() {
         if fast {
             sender.drain(Duration::from_secs(3600));
         } else {
@@ -313,6 +328,7 @@ fn schedule(sender: &Sender, frames: &[TrackerFrame], fast: bool) -> f64 {
             std::thread::sleep(due.saturating_sub(start.elapsed()));
         }
         sender.offer(*f);
+        after(i + 1);
     }
     start.elapsed().as_secs_f64()
 }
@@ -360,7 +376,7 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
 /// Streams the recording to the board; returns the summary and every
 /// message the board sent.
 pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
-    let _rig = rigfile::load(&rigfile::resolve(&args.rig))?;
+    let rig = rigfile::load(&rigfile::resolve(&args.rig))?;
     let frames = perform::frames(&import::csv::read_tracker_csv(&args.recording)?)?;
     let port = serialport::new(&args.port, args.baud)
         .timeout(Duration::from_millis(50))
@@ -374,7 +390,24 @@ pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
     let sender = Sender::spawn(port, link, args.frame);
     handshake(&sender, &replies, &args.port, Duration::from_secs(5))?;
     arm(&sender, &replies, &args.port)?;
-    let seconds = schedule(&sender, &frames, args.fast);
+    let mut rig_blob = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
+    let n = rig
+        .desc()
+        .to_blob(&mut rig_blob)
+        .map_err(|e| format!("{}: {e:?}", args.rig.display()))?;
+    rig_blob.truncate(n);
+    let title = format!(
+        "{}: {}",
+        rig.name(),
+        args.recording
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+    );
+    let seconds = super::view::watched_board(&args.view, &rig_blob, &title, &frames, |hook| {
+        Ok(schedule(&sender, &frames, args.fast, &|offered| {
+            hook(offered, sender.counts().dropped, &|| replies.recent(4096));
+        }))
+    })?;
     sender.drain(Duration::from_secs(2));
     sender.command(CommandKind::Disarm);
     let failed = sender.failed();

@@ -20,7 +20,7 @@
 //!   nothing in between. A client always gets the newest snapshot first,
 //!   then each new one; a slow client skips snapshots rather than queueing
 //!   them.
-//! - **Disconnects.** When the session ends, [`watch::Watch::close`] publishes a
+//! - **Disconnects.** When the session ends, [`View::end`] publishes a
 //!   last snapshot marked disconnected; if the server goes away, the page
 //!   keeps the last figure, greys it and says it lost the board.
 
@@ -75,6 +75,7 @@ pub struct View {
     addr: SocketAddr,
     feed: latest::Sender<Arc<str>>,
     last: Mutex<Option<Instant>>,
+    shown: Mutex<Option<Snapshot>>,
     stop: Option<oneshot::Sender<()>>,
 }
 
@@ -113,6 +114,7 @@ impl View {
             addr,
             feed,
             last: Mutex::new(None),
+            shown: Mutex::new(None),
             stop: Some(stop),
         })
     }
@@ -143,6 +145,20 @@ impl View {
         if let Ok(json) = serde_json::to_string(snapshot) {
             self.feed.send_replace(Arc::from(json));
         }
+        if let Ok(mut shown) = self.shown.lock() {
+            *shown = Some(snapshot.clone());
+        }
+    }
+
+    /// The session has ended: the last snapshot again, marked
+    /// disconnected, served for `linger` more.
+    pub fn end(&self, linger: Duration) {
+        let last = self.shown.lock().ok().and_then(|s| s.clone());
+        if let Some(mut last) = last {
+            last.link.connected = false;
+            self.publish(&last);
+        }
+        std::thread::sleep(linger);
     }
 }
 

@@ -47,31 +47,50 @@ impl<'a> Watch<'a> {
         self.view.offer(|| self.snapshot(taps));
     }
 
-    /// Ends the session: the last snapshot, marked disconnected, stays on
-    /// the page for `linger`.
-    pub fn close(self, taps: &Taps, linger: std::time::Duration) {
-        let mut last = self.snapshot(taps);
-        last.link.connected = false;
-        self.view.publish(&last);
-        std::thread::sleep(linger);
-    }
-
-    /// The snapshot of what the board has sent so far.
+    /// The snapshot of what the emulated board has sent so far.
     #[must_use]
     pub fn snapshot(&self, taps: &Taps) -> Snapshot {
         let per_frame = self.format.bytes_for(1).max(1);
         let done = taps.servo_len() / per_frame;
         let replies = perform::decode_replies(&taps.replies());
+        let bus = match &self.format {
+            ServoFormat::Maestro { .. } if done > 0 => self
+                .format
+                .decode(&taps.servo_bytes((done - 1) * per_frame..done * per_frame))
+                .pop(),
+            _ => None,
+        };
+        self.compose(&replies, bus, done, 0)
+    }
+
+    /// Offers the view a real board's state: its recent replies (the
+    /// servo targets from its last `Telemetry`), `sent` tracker frames
+    /// sent so far and `drops` dropped by the sender.
+    pub fn replies(&self, recent: &dyn Fn() -> Vec<Message>, sent: usize, drops: u64) {
+        self.view
+            .offer(|| self.compose(&recent(), None, sent, drops));
+    }
+
+    /// The snapshot of the board's replies, with the servo targets of
+    /// `bus` if given (else its last telemetry's), after `done` frames.
+    fn compose(
+        &self,
+        replies: &[Message],
+        bus: Option<Vec<u16>>,
+        done: usize,
+        drops: u64,
+    ) -> Snapshot {
         let mut link = LinkView {
             frames: done as u64,
             rate_hz: done as f64 / self.start.elapsed().as_secs_f64().max(1e-3),
+            drops,
             connected: true,
             state: "waiting".into(),
             ..LinkView::default()
         };
         let mut residuals = Vec::new();
         let mut telemetry_targets = Vec::new();
-        for m in &replies {
+        for m in replies {
             match m {
                 Message::Telemetry(t) => {
                     link.errors = u64::from(error_total(&t.errors));
@@ -88,14 +107,7 @@ impl<'a> Watch<'a> {
                 _ => {}
             }
         }
-        let targets = match &self.format {
-            ServoFormat::Maestro { .. } if done > 0 => self
-                .format
-                .decode(&taps.servo_bytes((done - 1) * per_frame..done * per_frame))
-                .pop()
-                .unwrap_or_default(),
-            _ => telemetry_targets,
-        };
+        let targets = bus.unwrap_or(telemetry_targets);
         self.scene.snapshot(&Reported {
             targets: &targets,
             frame: done.checked_sub(1).and_then(|i| self.frames.get(i)),
