@@ -23,3 +23,4 @@ pub mod render;
 pub mod rigfile;
 pub mod save;
 pub mod sender;
+pub mod take;

@@ -54,6 +54,10 @@ enum Command {
     Rig(cmd::rig::Args),
     /// Perform from a live source (VMC / OSC over UDP) on the emulated or a real board.
     Live(cmd::live::Args),
+    /// Takes: summarize (`info`), edit (`edit`), export curves and BVH (`export`).
+    Take(cmd::take::Args),
+    /// Send a take's input again to the emulated board or a serial port.
+    Replay(cmd::replay::Args),
 }
 
 fn main() -> ExitCode {
@@ -75,6 +79,8 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => cmd::calibrate::run(&args),
         Command::Rig(args) => cmd::rig::run(&args),
         Command::Live(args) => cmd::live::run(&args),
+        Command::Take(args) => cmd::take::run(&args),
+        Command::Replay(args) => cmd::replay::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

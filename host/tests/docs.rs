@@ -63,7 +63,8 @@ fn every_page_is_listed_and_every_page_has_examples() {
             "goals.md",
             "recording.md",
             "rig.md",
-            "spec.md"
+            "spec.md",
+            "take.md"
         ]
     );
     for p in &pages {
@@ -187,4 +188,45 @@ fn the_recording_example_is_read() {
             .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(samples.len(), 4);
     }
+}
+
+/// The hex bytes of a layout block (`text`): each line's leading run of
+/// two-digit hex tokens, up to the comment; lines of placeholders
+/// (`c0 c1 …`) end it.
+fn hex_bytes(block: &str) -> Vec<u8> {
+    let mut out = Vec::new();
+    for line in block.lines() {
+        if line.starts_with("c0 c1") {
+            break;
+        }
+        for tok in line.split_whitespace() {
+            match u8::from_str_radix(tok, 16) {
+                Ok(b) if tok.len() == 2 => out.push(b),
+                _ => break,
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn the_take_example_is_the_bytes_the_host_writes() {
+    use marionette_host::take::{Event, EventKind, Take};
+    let block = of("take.md", "text").remove(0);
+    let take = Take {
+        channels: 2,
+        period_us: 1000,
+        region: vec![0xAA, 0xBB],
+        source: "t".into(),
+        events: vec![
+            Event {
+                time_us: 5,
+                kind: EventKind::Sent,
+                data: vec![0x00, 0x01],
+            },
+            Event::output(6, true, &[0x1770, 0x0001]),
+        ],
+    };
+    let bytes = take.to_bytes().unwrap();
+    assert_eq!(hex_bytes(&block), bytes[..bytes.len() - 4]);
 }

@@ -12,11 +12,13 @@ pub mod live;
 pub mod plot;
 pub mod record;
 pub mod render;
+pub mod replay;
 pub mod rig;
 pub mod sim;
 pub mod solve;
 pub mod stream;
 pub mod synth;
+pub mod take;
 
 /// An error from any subcommand, printed by `main` as `marionette: <error>`.
 pub type CmdError = Box<dyn std::error::Error + Send + Sync>;
