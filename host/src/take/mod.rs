@@ -16,6 +16,10 @@
 //! the time of the message it answers (its sequence number), or of the
 //! last message sent before it.
 
+pub mod edit;
+pub mod export;
+pub mod filter;
+
 use crate::perform::{self, PerformError, Run, Sent};
 use marionette_core::crc::crc32;
 use marionette_core::region::Region;
