@@ -557,6 +557,7 @@ pub fn rig_blob(data: &[u8]) -> Outcome {
         rig: Some(rig.clone()),
         table: None,
         reason: StatusReason::NoTable,
+        ..Region::EMPTY
     };
     let mut solver = SolverState::new();
     let mut p = Performer::new(&region, &mut solver);

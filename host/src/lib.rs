@@ -23,4 +23,5 @@ pub mod render;
 pub mod rigfile;
 pub mod save;
 pub mod sender;
+pub mod show;
 pub mod take;

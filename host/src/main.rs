@@ -58,6 +58,8 @@ enum Command {
     Take(cmd::take::Args),
     /// Send a take's input again to the emulated board or a serial port.
     Replay(cmd::replay::Args),
+    /// Shows played from flash with no host: `build` one from takes.
+    Show(cmd::show::Args),
 }
 
 fn main() -> ExitCode {
@@ -81,6 +83,7 @@ fn main() -> ExitCode {
         Command::Live(args) => cmd::live::run(&args),
         Command::Take(args) => cmd::take::run(&args),
         Command::Replay(args) => cmd::replay::run(&args),
+        Command::Show(args) => cmd::show::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -63,6 +63,7 @@ fn every_page_is_listed_and_every_page_has_examples() {
             "goals.md",
             "recording.md",
             "rig.md",
+            "show.md",
             "spec.md",
             "take.md"
         ]
@@ -229,4 +230,17 @@ fn the_take_example_is_the_bytes_the_host_writes() {
     };
     let bytes = take.to_bytes().unwrap();
     assert_eq!(hex_bytes(&block), bytes[..bytes.len() - 4]);
+}
+
+#[test]
+fn the_show_example_is_the_bytes_the_host_writes_and_decodes() {
+    use marionette_core::show::Show;
+    let block = of("show.md", "text").remove(0);
+    let frames = vec![vec![6000u16], vec![6002], vec![6004]];
+    let blob =
+        marionette_host::show::encode(&frames, &[true], 0x0102_0304_0506_0708, 1000, 4, 1).unwrap();
+    assert_eq!(hex_bytes(&block), blob[..blob.len() - 4]);
+    let show = Show::parse(&blob).unwrap();
+    assert_eq!(show.target(0, 1), Some(6002));
+    assert!(show.looping() && !show.at_boot());
 }

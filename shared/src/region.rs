@@ -29,7 +29,9 @@
 //! and after the last one up to a multiple of 4.
 //!
 //! Entry kinds ([`EntryKind`]): 1 the rig blob ([`crate::rig`]; exactly one),
-//! 2 a table blob ([`crate::table`]; the first one is table 0). A reader
+//! 2 a table blob ([`crate::table`]; the first one is table 0), 3 a show
+//! ([`crate::show`]; the first one is played; added within version 1, as
+//! the rule below allows: a reader that predates it skips it). A reader
 //! skips entries of kinds it does not know, so later formats can add entries
 //! (more tables, a show) that an older firmware ignores; a change that an
 //! older reader would misread bumps [`VERSION`], and a reader refuses a
@@ -70,6 +72,7 @@ use core::fmt;
 use crate::crc::{Crc32, crc32};
 use crate::pose::MAX_SEGMENTS;
 use crate::rig::{self, MAX_PARAMS, Rig, RigError};
+use crate::show::{self, Show, ShowError};
 use crate::table::{Kind, Table, TableError};
 use crate::wire::StatusReason;
 
@@ -100,6 +103,8 @@ impl EntryKind {
     pub const RIG: Self = Self(1);
     /// A table blob ([`crate::table`]).
     pub const TABLE: Self = Self(2);
+    /// A show ([`crate::show`]; the first one is played).
+    pub const SHOW: Self = Self(3);
 }
 
 /// One blob of a region.
@@ -126,6 +131,15 @@ impl<'a> Entry<'a> {
     pub const fn table(bytes: &'a [u8]) -> Self {
         Self {
             kind: EntryKind::TABLE,
+            bytes,
+        }
+    }
+
+    /// The show blob `bytes`.
+    #[must_use]
+    pub const fn show(bytes: &'a [u8]) -> Self {
+        Self {
+            kind: EntryKind::SHOW,
             bytes,
         }
     }
@@ -398,6 +412,10 @@ pub struct Region<'a, const N: usize = MAX_SEGMENTS> {
     pub table: Option<Table<'a>>,
     /// Why the board cannot arm ([`StatusReason::Ok`] if it can).
     pub reason: StatusReason,
+    /// The first show, if it is valid and built for the rig.
+    pub show: Option<Show<'a>>,
+    /// Why the region's show was refused, if it has one that was.
+    pub show_error: Option<ShowError>,
 }
 
 impl<'a> Region<'a> {
@@ -427,6 +445,8 @@ impl<'a, const N: usize> Region<'a, N> {
         rig: None,
         table: None,
         reason: StatusReason::NoRig,
+        show: None,
+        show_error: None,
     };
 
     /// [`Region::parse_sized`] in place, for a caller that keeps the region
@@ -438,6 +458,8 @@ impl<'a, const N: usize> Region<'a, N> {
         self.rig = None;
         self.table = None;
         self.reason = StatusReason::NoRig;
+        self.show = None;
+        self.show_error = None;
         match directory(bytes) {
             Ok(dir) => self.parse_entries(&dir),
             Err(RegionError::Magic) if is_legacy(bytes) => self.parse_legacy(bytes),
@@ -457,6 +479,14 @@ impl<'a, const N: usize> Region<'a, N> {
         }
         let table = dir.find(EntryKind::TABLE, 0).map_or(&[][..], |e| e.bytes);
         self.parse_table(table);
+        if let (Some(entry), Some(rig)) = (dir.find(EntryKind::SHOW, 0), &self.rig) {
+            let parsed = Show::parse(entry.bytes)
+                .and_then(|s| show::check_rig(&s, rig.rig_hash()).map(|()| s));
+            (self.show, self.show_error) = match parsed {
+                Ok(s) => (Some(s), None),
+                Err(e) => (None, Some(e)),
+            };
+        }
     }
 
     /// The older layout: rig blob, padding, table blob.

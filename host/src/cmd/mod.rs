@@ -14,6 +14,7 @@ pub mod record;
 pub mod render;
 pub mod replay;
 pub mod rig;
+pub mod show;
 pub mod sim;
 pub mod solve;
 pub mod stream;
