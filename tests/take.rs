@@ -161,3 +161,44 @@ fn the_bvh_export_parses_back_to_the_solved_figure() {
         }
     }
 }
+
+#[test]
+fn a_flashed_show_plays_at_boot_with_no_host_within_its_bound() {
+    use marionette_host::qemu::{self, Config, Emulator};
+    use marionette_host::show;
+    let take = emulated_take(600);
+    let bound = 4; // quarter-µs: 1 µs
+    let (blob, report) = show::build(std::slice::from_ref(&take), bound, false, true).unwrap();
+    assert!(report.worst_quarter_us <= u32::from(bound));
+    assert!(report.show_bytes < report.raw_bytes / 4, "{report:?}");
+    let (curves, _) = show::frames(std::slice::from_ref(&take)).unwrap();
+    let region = show::with_show(&take.region, &blob).unwrap();
+    let mut file = tempfile::NamedTempFile::new().unwrap();
+    std::io::Write::write_all(&mut file, &region).unwrap();
+    let config = Config {
+        tables: Some(file.path().to_path_buf()),
+        ..Config::new(qemu::firmware_elf("perform").unwrap())
+    };
+    // No tracker input at all: the board plays the show from boot.
+    let mut board = Emulator::start(&config).unwrap();
+    let frames = curves.len();
+    board.wait_servo_bytes(frames * 16 * 4).unwrap();
+    let bytes = board.take_servo();
+    drop(board);
+    let sent = perform::decode_maestro(&bytes, 16);
+    assert!(sent.len() >= frames, "{} of {frames} frames", sent.len());
+    let mut worst = 0;
+    for (k, (got, want)) in sent.iter().zip(&curves).enumerate() {
+        for ch in 0..16 {
+            let d = got[ch].abs_diff(want[ch]);
+            worst = worst.max(d);
+            assert!(
+                d <= bound,
+                "frame {k} channel {ch}: {} vs {}",
+                got[ch],
+                want[ch]
+            );
+        }
+    }
+    eprintln!("show: {frames} frames, worst {worst} quarter-µs (bound {bound})");
+}

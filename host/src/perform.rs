@@ -469,7 +469,7 @@ fn record(
             outputs.push((message, true, targets.clone(), now));
             run.frame_targets.push(targets);
         }
-        Some(Cause::Rest) => {
+        Some(Cause::Rest | Cause::Show(_)) => {
             outputs.push((message, false, targets.clone(), now));
             run.rest_targets.push(targets);
         }

@@ -19,6 +19,8 @@
 use crate::take::Take;
 use marionette_core::crc::crc32;
 use marionette_core::region::{self, Entry, EntryKind, Region};
+use marionette_core::rig::Rig;
+use marionette_core::servo::Slew;
 use marionette_core::show::{self, Cursor, KEY_LEN, Show, interpolate};
 use serde::Serialize;
 
@@ -120,39 +122,89 @@ pub fn frames(takes: &[Take]) -> Result<(Vec<Vec<u16>>, u32), ShowBuildError> {
     Ok((out, period))
 }
 
-/// The keys of one channel's samples within `bound` (see the module doc).
+/// What a board makes of a decoded target: the channel's slew limiter
+/// following it ([`Slew::track`], as the core's player does), or the
+/// target itself.
+fn played(slew: &mut Option<Slew>, target: u16) -> u16 {
+    match slew {
+        Some(s) => s.track(target),
+        None => target,
+    }
+}
+
+/// The keys of one channel's samples within `bound` (see the module doc),
+/// as played through `slew` (the channel's limiter at the start of the
+/// show; `None`: the decoded targets themselves).
 #[must_use]
-pub fn keys(samples: &[u16], bound: u16) -> Vec<(u32, u16)> {
+pub fn keys(samples: &[u16], bound: u16, slew: Option<Slew>) -> Vec<(u32, u16)> {
     let n = samples.len();
     let mut out = Vec::new();
     let Some(&v0) = samples.first() else {
         return out;
     };
     out.push((0u32, v0));
+    let mut state = slew;
+    played(&mut state, v0);
     let mut s = 0usize;
     while s + 1 < n {
+        // The limiter after frames s + 1 ..= e of the segment s..e, if
+        // every one of them is within the bound.
         let fits = |e: usize| {
             let (vs, ve) = (samples[s], samples[e]);
-            (s + 1..e).all(|f| {
-                let d = interpolate(s as u32, vs, e as u32, ve, f as u32);
-                d.abs_diff(samples[f]) <= bound
-            })
+            let mut sim = state;
+            (s + 1..=e)
+                .all(|f| {
+                    let d = interpolate(s as u32, vs, e as u32, ve, f as u32);
+                    played(&mut sim, d).abs_diff(samples[f]) <= bound
+                })
+                .then_some(sim)
         };
         let mut e = s + 1;
-        while e + 1 < n && e + 1 - s <= MAX_SPAN && fits(e + 1) {
-            e += 1;
+        let mut next = fits(e);
+        while e + 1 < n && e + 1 - s <= MAX_SPAN {
+            match fits(e + 1) {
+                Some(sim) => (e, next) = (e + 1, Some(sim)),
+                None => break,
+            }
         }
+        state = next.unwrap_or_else(|| {
+            // Not even the next frame is within the bound: keep it exact
+            // (the check after encoding reports the error).
+            let mut sim = state;
+            played(&mut sim, samples[e]);
+            sim
+        });
         out.push((e as u32, samples[e]));
         s = e;
     }
     out
 }
 
-/// The show blob of `frames` for the rig of hash `rig_hash`, driving
-/// `driven` channels (the others get no keys).
+/// Each channel's slew limiter as a show starts on the rig (at rest,
+/// still, with the limits for the frame period), as the core's player
+/// has it.
+#[must_use]
+pub fn slews(rig: &Rig<'_>, channels: usize) -> Vec<Option<Slew>> {
+    let period = rig.frame_period_s();
+    let mut out = vec![None; channels];
+    for servo in rig.servos() {
+        if let Some(slot) = out.get_mut(usize::from(servo.channel)) {
+            *slot = Some(Slew::for_channel(
+                &servo.calibration(),
+                servo.step_limits(period),
+                servo.rest_us,
+            ));
+        }
+    }
+    out
+}
+
+/// The show blob of `frames` for the rig of hash `rig_hash`, driving the
+/// channels with a limiter in `driven` (`Some`: as played through it; the
+/// others get no keys).
 pub fn encode(
     frames: &[Vec<u16>],
-    driven: &[bool],
+    driven: &[Option<Option<Slew>>],
     rig_hash: u64,
     period_us: u32,
     bound: u16,
@@ -173,16 +225,15 @@ pub fn encode(
     let per_channel: Vec<Vec<(u32, u16)>> = driven
         .iter()
         .enumerate()
-        .map(|(ch, &d)| {
-            if d {
+        .map(|(ch, d)| match d {
+            Some(slew) => {
                 let samples: Vec<u16> = frames
                     .iter()
                     .map(|f| f.get(ch).copied().unwrap_or(0))
                     .collect();
-                keys(&samples, bound)
-            } else {
-                Vec::new()
+                keys(&samples, bound, *slew)
             }
+            None => Vec::new(),
         })
         .collect();
     for k in &per_channel {
@@ -199,17 +250,24 @@ pub fn encode(
 }
 
 /// The worst error of a show against `frames`, decoding each channel it
-/// drives frame by frame with the core's player.
-pub fn worst_error(blob: &[u8], frames: &[Vec<u16>]) -> Result<u32, ShowBuildError> {
+/// drives frame by frame with the core's player, through `slews` (each
+/// channel's limiter at the start; `None`: the decoded targets).
+pub fn worst_error(
+    blob: &[u8],
+    frames: &[Vec<u16>],
+    slews: &[Option<Slew>],
+) -> Result<u32, ShowBuildError> {
     let show = Show::parse(blob).map_err(ShowBuildError::Refused)?;
     let mut cursor = Cursor::default();
+    let mut limiters = slews.to_vec();
+    limiters.resize(usize::from(show.channels()), None);
     let mut worst = 0u32;
     for (f, targets) in frames.iter().enumerate() {
         let f = f as u32;
-        for ch in 0..show.channels() {
+        for (ch, slew) in (0..show.channels()).zip(limiters.iter_mut()) {
             if let Some(v) = cursor.target(&show, ch, f) {
                 let want = targets.get(usize::from(ch)).copied().unwrap_or(0);
-                worst = worst.max(u32::from(v.abs_diff(want)));
+                worst = worst.max(u32::from(played(slew, v).abs_diff(want)));
             }
         }
         cursor.played(f);
@@ -244,15 +302,11 @@ pub fn build(
     let region = Region::parse(region_bytes);
     let rig = region.rig.as_ref().ok_or(ShowBuildError::NoRig)?;
     let channels = frames.first().map_or(0, Vec::len);
-    let mut driven = vec![false; channels];
-    for s in rig.servos() {
-        if let Some(d) = driven.get_mut(usize::from(s.channel)) {
-            *d = true;
-        }
-    }
+    let limiters = slews(rig, channels);
+    let driven: Vec<Option<Option<Slew>>> = limiters.iter().map(|s| s.map(Some)).collect();
     let flags = if looping { show::LOOP } else { 0 } | if at_boot { show::AT_BOOT } else { 0 };
     let blob = encode(&frames, &driven, rig.rig_hash(), period, bound, flags)?;
-    let worst = worst_error(&blob, &frames)?;
+    let worst = worst_error(&blob, &frames, &limiters)?;
     if worst > u32::from(bound) {
         return Err(ShowBuildError::Bound { worst, bound });
     }
@@ -261,10 +315,7 @@ pub fn build(
         frames: frames.len() as u32,
         period_us: period,
         seconds: frames.len() as f64 * f64::from(period) / 1e6,
-        channels: [
-            channels as u16,
-            driven.iter().filter(|d| **d).count() as u16,
-        ],
+        channels: [channels as u16, driven.iter().flatten().count() as u16],
         keys,
         bound_quarter_us: bound,
         worst_quarter_us: worst,
@@ -285,7 +336,7 @@ mod tests {
         // 0, 10, 20, …, 100 then held at 100 for 10 frames: exact with
         // keys at 0, 10 and 20.
         let samples: Vec<u16> = (0..=10).map(|k| k * 10).chain([100; 10]).collect();
-        assert_eq!(keys(&samples, 0), vec![(0, 0), (10, 100), (20, 100)]);
+        assert_eq!(keys(&samples, 0, None), vec![(0, 0), (10, 100), (20, 100)]);
     }
 
     #[test]
@@ -302,7 +353,7 @@ mod tests {
         let frames: Vec<Vec<u16>> = samples.iter().map(|&v| vec![v, 6000]).collect();
         let mut size = 0;
         for bound in [0u16, 2, 4, 8, 16, 40] {
-            let blob = encode(&frames, &[true, false], 7, 1000, bound, 0).unwrap();
+            let blob = encode(&frames, &[Some(None), None], 7, 1000, bound, 0).unwrap();
             let show = Show::parse(&blob).unwrap();
             for (f, &want) in samples.iter().enumerate() {
                 let got = show.target(0, f as u32).unwrap();
@@ -312,7 +363,7 @@ mod tests {
                 );
             }
             assert_eq!(show.target(1, 0), None, "an undriven channel");
-            assert!(worst_error(&blob, &frames).unwrap() <= u32::from(bound));
+            assert!(worst_error(&blob, &frames, &[]).unwrap() <= u32::from(bound));
             size = blob.len();
         }
         assert!(size < samples.len() * 2 / 4, "compresses: {size} bytes");
@@ -321,7 +372,7 @@ mod tests {
     #[test]
     fn a_damaged_show_is_refused() {
         let frames: Vec<Vec<u16>> = (0..50u16).map(|k| vec![6000 + k * 3, 5000]).collect();
-        let blob = encode(&frames, &[true, true], 9, 1000, 2, show::LOOP).unwrap();
+        let blob = encode(&frames, &[Some(None), Some(None)], 9, 1000, 2, show::LOOP).unwrap();
         assert!(Show::parse(&blob).is_ok());
         for cut in 0..blob.len() {
             assert!(Show::parse(&blob[..cut]).is_err(), "cut at {cut}");

@@ -238,7 +238,8 @@ fn the_show_example_is_the_bytes_the_host_writes_and_decodes() {
     let block = of("show.md", "text").remove(0);
     let frames = vec![vec![6000u16], vec![6002], vec![6004]];
     let blob =
-        marionette_host::show::encode(&frames, &[true], 0x0102_0304_0506_0708, 1000, 4, 1).unwrap();
+        marionette_host::show::encode(&frames, &[Some(None)], 0x0102_0304_0506_0708, 1000, 4, 1)
+            .unwrap();
     assert_eq!(hex_bytes(&block), blob[..blob.len() - 4]);
     let show = Show::parse(&blob).unwrap();
     assert_eq!(show.target(0, 1), Some(6002));

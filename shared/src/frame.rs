@@ -99,6 +99,7 @@ use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
 pub use crate::region::Region;
 use crate::rig::{Idle, MAX_PARAMS, Rig};
 use crate::servo::{Slew, quarter_us};
+use crate::show::{Cursor as ShowCursor, Show};
 use crate::solve::{self, Solver, SolverState};
 use crate::table::Table;
 use crate::wire::{List, MAX_GOALS, MAX_SENSORS, MAX_SERVOS, STAGES, Sensor, ValidTrackerFrame};
@@ -775,6 +776,32 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             }
         }
         self.step_dt = Some(dt);
+    }
+
+    /// One frame of a show ([`crate::show`]): every servo the show drives
+    /// follows its target for `frame` through its slew limiter
+    /// ([`Slew::track`]: never outside its calibrated range, never faster
+    /// than its speed and acceleration limits); a servo the show does not
+    /// drive eases to rest. Any jog ends.
+    pub fn play_step(&mut self, show: &Show<'_>, cursor: &mut ShowCursor, frame: u32) {
+        let period = self.rig.frame_period_s();
+        self.set_step(period);
+        self.jog = None;
+        for servo in self.rig.servos() {
+            let ch = usize::from(servo.channel);
+            let (Some(Some(slew)), Some(t)) = (self.slews.get_mut(ch), self.targets.get_mut(ch))
+            else {
+                continue;
+            };
+            *t = match cursor.target(show, u16::from(servo.channel), frame) {
+                Some(goal) => slew.track(goal),
+                None => slew.update(quarter_us(servo.rest_us)),
+            };
+        }
+        cursor.played(frame);
+        self.resting = false;
+        self.released = false;
+        self.driven = true;
     }
 
     /// One rest-ward step of every servo at the frame period (a jogged
