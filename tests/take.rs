@@ -202,3 +202,62 @@ fn a_flashed_show_plays_at_boot_with_no_host_within_its_bound() {
     }
     eprintln!("show: {frames} frames, worst {worst} quarter-µs (bound {bound})");
 }
+
+#[test]
+fn the_core_plays_a_show_once_or_looping_and_arm_stops_it() {
+    use marionette_core::frame::{Cause, NoCycles, Performer, Region};
+    use marionette_core::solve::SolverState;
+    use marionette_core::wire::{Command, CommandKind, MAX_FRAME, Message, encode};
+    use marionette_host::show;
+    let take = emulated_take(80);
+    let (curves, _) = show::frames(std::slice::from_ref(&take)).unwrap();
+    let n = curves.len() as u32;
+    for looping in [false, true] {
+        let (blob, _) = show::build(std::slice::from_ref(&take), 0, looping, true).unwrap();
+        let bytes = show::with_show(&take.region, &blob).unwrap();
+        let region = Region::parse(&bytes);
+        assert!(region.show.is_some(), "{:?}", region.show_error);
+        let mut solver = SolverState::new();
+        let mut p = Performer::new(&region, &mut solver);
+        assert_eq!(p.playing(), Some(0), "plays at boot");
+        // Bound 0: every frame is the take's target exactly.
+        for k in 0..n {
+            let u = p.tick(1000 * (k + 1));
+            assert_eq!(u.outputs, Some(Cause::Show(k)));
+            assert_eq!(p.targets(), &curves[k as usize][..], "frame {k}");
+        }
+        if looping {
+            assert_eq!(p.playing(), Some(0));
+            assert_eq!(p.tick(1000 * (n + 1)).outputs, Some(Cause::Show(0)));
+            // The host arms: the show stops.
+            let mut buf = [0u8; MAX_FRAME];
+            let arm = Message::Command(Command {
+                seq: 0,
+                kind: CommandKind::Arm,
+            });
+            let mut input = &*encode(&arm, &mut buf).unwrap();
+            while !input.is_empty() {
+                p.receive(&mut input, 1000 * (n + 2), &mut NoCycles);
+            }
+            assert_eq!(p.playing(), None);
+            assert!(p.armed());
+        } else {
+            assert_eq!(p.playing(), None, "played once");
+            assert_ne!(p.tick(1000 * (n + 1)).outputs, Some(Cause::Show(0)));
+        }
+    }
+    // A show built for another rig is refused by the region.
+    let (blob, _) = show::build(std::slice::from_ref(&take), 0, false, true).unwrap();
+    let mut other = blob.clone();
+    other[8] ^= 1; // the rig hash
+    let crc = marionette_core::crc::crc32(&other[..other.len() - 4]);
+    let len = other.len();
+    other[len - 4..].copy_from_slice(&crc.to_le_bytes());
+    let bytes = show::with_show(&take.region, &other).unwrap();
+    let region = Region::parse(&bytes);
+    assert!(region.show.is_none());
+    assert_eq!(
+        region.show_error,
+        Some(marionette_core::show::ShowError::RigMismatch)
+    );
+}
