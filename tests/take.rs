@@ -235,7 +235,7 @@ fn the_core_plays_a_show_once_or_looping_and_arm_stops_it() {
                 seq: 0,
                 kind: CommandKind::Arm,
             });
-            let mut input = &*encode(&arm, &mut buf).unwrap();
+            let mut input: &[u8] = encode(&arm, &mut buf).unwrap();
             while !input.is_empty() {
                 p.receive(&mut input, 1000 * (n + 2), &mut NoCycles);
             }
@@ -260,4 +260,57 @@ fn the_core_plays_a_show_once_or_looping_and_arm_stops_it() {
         region.show_error,
         Some(marionette_core::show::ShowError::RigMismatch)
     );
+}
+
+#[test]
+fn a_show_waits_for_its_command_on_the_link() {
+    use marionette_core::wire::{Command, CommandKind, Hello, Message, PROTOCOL_VERSION};
+    use marionette_host::qemu::{self, Config, Emulator};
+    use marionette_host::show;
+    let take = emulated_take(300);
+    let bound = 4;
+    let (blob, _) = show::build(std::slice::from_ref(&take), bound, false, false).unwrap();
+    let (curves, _) = show::frames(std::slice::from_ref(&take)).unwrap();
+    let region = show::with_show(&take.region, &blob).unwrap();
+    let mut file = tempfile::NamedTempFile::new().unwrap();
+    std::io::Write::write_all(&mut file, &region).unwrap();
+    let config = Config {
+        tables: Some(file.path().to_path_buf()),
+        ..Config::new(qemu::firmware_elf("perform").unwrap())
+    };
+    let mut board = Emulator::start(&config).unwrap();
+    let hello = Message::Hello(Hello {
+        protocol_version: PROTOCOL_VERSION,
+    });
+    board.send(&perform::encode(&hello).unwrap()).unwrap();
+    board
+        .wait_replies(|b| !perform::decode_replies(b).is_empty())
+        .unwrap();
+    // Nothing moves before the command.
+    assert!(board.take_servo().is_empty());
+    let play = Message::Command(Command {
+        seq: 1,
+        kind: CommandKind::Show { play: true },
+    });
+    board.send(&perform::encode(&play).unwrap()).unwrap();
+    board.wait_servo_bytes(curves.len() * 16 * 4).unwrap();
+    let bytes = board.take_servo();
+    let replies = perform::decode_replies(&board.replies_so_far());
+    drop(board);
+    assert!(
+        replies
+            .iter()
+            .any(|m| matches!(m, Message::Ack(a) if a.seq == 1 && a.ok)),
+        "{replies:?}"
+    );
+    let sent = perform::decode_maestro(&bytes, 16);
+    assert!(sent.len() >= curves.len());
+    for (k, (got, want)) in sent.iter().zip(&curves).enumerate() {
+        for ch in 0..16 {
+            assert!(
+                got[ch].abs_diff(want[ch]) <= bound,
+                "frame {k} channel {ch}"
+            );
+        }
+    }
 }

@@ -63,7 +63,9 @@
 //! calibrated range and speed and acceleration limits), and the outputs go
 //! out every frame ([`Cause::Show`]). At its end the show starts again
 //! (loop) or the servos ease to rest. `Arm` (the host takes over),
-//! `Disarm` or a board that cannot drive its rig stop it; tracker frames
+//! `Disarm`, the command `Show { play: false }` or a board that cannot
+//! drive its rig stop it (`Show { play: true }` starts it from its first
+//! frame); tracker frames
 //! taken while it plays move nothing; `Jog` is refused while it plays.
 //!
 //! ## Replies
@@ -638,6 +640,11 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             }
             CommandKind::RequestStatus => return Message::Status(self.status(Some(c.seq()))),
             CommandKind::Jog { channel, target } => self.jog(channel, target),
+            CommandKind::Show { play: true } => self.play_show(),
+            CommandKind::Show { play: false } => {
+                self.stop_show();
+                true
+            }
         };
         Message::Ack(Ack { seq: c.seq(), ok })
     }

@@ -19,6 +19,22 @@ pub struct Args {
 pub enum Action {
     /// Build a show from one or more takes (played one after another).
     Build(BuildArgs),
+    /// Start (or `--stop`) the show flashed on a board, over its tracker link.
+    Play(PlayArgs),
+}
+
+/// Arguments of `marionette show play`.
+#[derive(clap::Args, Debug)]
+pub struct PlayArgs {
+    /// The board's tracker serial port.
+    #[arg(long)]
+    pub port: String,
+    /// Baud rate of the tracker link.
+    #[arg(long, default_value_t = 921_600)]
+    pub baud: u32,
+    /// Stop the show instead.
+    #[arg(long)]
+    pub stop: bool,
 }
 
 /// Arguments of `marionette show build`.
@@ -53,6 +69,65 @@ pub struct BuildArgs {
 pub fn run(args: &Args) -> Result<(), CmdError> {
     match &args.action {
         Action::Build(a) => build(a),
+        Action::Play(a) => play(a),
+    }
+}
+
+/// Says `Hello` until the board answers, then sends `Show { play }` and
+/// waits for its `Ack`.
+fn play(args: &PlayArgs) -> Result<(), CmdError> {
+    use marionette_core::wire::{Command, CommandKind, Hello, Message, PROTOCOL_VERSION};
+    use std::io::Write as _;
+    use std::time::Duration;
+    let name = &args.port;
+    let mut port = serialport::new(name, args.baud)
+        .timeout(Duration::from_millis(50))
+        .open()
+        .map_err(|e| format!("{name}: {e}"))?;
+    let reader = port.try_clone().map_err(|e| format!("{name}: {e}"))?;
+    let replies = super::stream::Replies::spawn(reader);
+    let hello = crate::perform::encode(&Message::Hello(Hello {
+        protocol_version: PROTOCOL_VERSION,
+    }))?;
+    let mut answered = false;
+    for _ in 0..5 {
+        port.write_all(&hello).map_err(|e| format!("{name}: {e}"))?;
+        let got = replies.wait_for(Duration::from_secs(1), |m| match m {
+            Message::Status(s) if s.request_seq.is_none() => Some(()),
+            _ => None,
+        });
+        if got.is_some() {
+            answered = true;
+            break;
+        }
+    }
+    if !answered {
+        return Err(format!("{name}: no answer from the board in 5 s").into());
+    }
+    let command = Message::Command(Command {
+        seq: 1,
+        kind: CommandKind::Show { play: !args.stop },
+    });
+    port.write_all(&crate::perform::encode(&command)?)
+        .map_err(|e| format!("{name}: {e}"))?;
+    let ack = replies.wait_for(Duration::from_secs(2), |m| match m {
+        Message::Ack(a) if a.seq == 1 => Some(a.ok),
+        _ => None,
+    });
+    replies.finish();
+    match ack {
+        Some(true) => {
+            println!(
+                "{name}: show {}",
+                if args.stop { "stopped" } else { "playing" }
+            );
+            Ok(())
+        }
+        Some(false) => Err(format!(
+            "{name}: the board refused: it is armed, or its region holds no show for its rig"
+        )
+        .into()),
+        None => Err(format!("{name}: the board did not answer the command within 2 s").into()),
     }
 }
 
