@@ -672,11 +672,9 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         let frame = self.receiver.frame();
         let seq = frame.seq();
         let dt = pipeline.take(frame);
-        if !self.armed && self.playing.is_some() {
-            return Update::NONE;
-        }
         if !self.armed {
-            let moved = pipeline.rest_step();
+            // While the show plays, a frame moves nothing.
+            let moved = self.playing.is_none() && pipeline.rest_step();
             return Update {
                 outputs: moved.then_some(Cause::Rest),
                 reply: None,
