@@ -781,8 +781,8 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
     /// One frame of a show ([`crate::show`]): every servo the show drives
     /// follows its target for `frame` through its slew limiter
     /// ([`Slew::track`]: never outside its calibrated range, never faster
-    /// than its speed and acceleration limits); a servo the show does not
-    /// drive eases to rest. Any jog ends.
+    /// than its speed limit); a servo the show does not drive goes back to
+    /// rest the same way. Any jog ends.
     pub fn play_step(&mut self, show: &Show<'_>, cursor: &mut ShowCursor, frame: u32) {
         let period = self.rig.frame_period_s();
         self.set_step(period);
@@ -793,10 +793,10 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             else {
                 continue;
             };
-            *t = match cursor.target(show, u16::from(servo.channel), frame) {
-                Some(goal) => slew.track(goal),
-                None => slew.update(quarter_us(servo.rest_us)),
-            };
+            let goal = cursor
+                .target(show, u16::from(servo.channel), frame)
+                .unwrap_or_else(|| quarter_us(servo.rest_us));
+            *t = slew.track(goal);
         }
         cursor.played(frame);
         self.resting = false;

@@ -29,9 +29,10 @@
 //! and after the last one up to a multiple of 4.
 //!
 //! Entry kinds ([`EntryKind`]): 1 the rig blob ([`crate::rig`]; exactly one),
-//! 2 a table blob ([`crate::table`]; the first one is table 0), 3 a show
+//! 2 a table blob ([`crate::table`]; the first one is table 0), 4 a show
 //! ([`crate::show`]; the first one is played; added within version 1, as
-//! the rule below allows: a reader that predates it skips it). A reader
+//! the rule below allows: a reader that predates it skips it; kind 3 is
+//! taken by the layers of #18 on main). A reader
 //! skips entries of kinds it does not know, so later formats can add entries
 //! (more tables, a show) that an older firmware ignores; a change that an
 //! older reader would misread bumps [`VERSION`], and a reader refuses a
@@ -104,7 +105,7 @@ impl EntryKind {
     /// A table blob ([`crate::table`]).
     pub const TABLE: Self = Self(2);
     /// A show ([`crate::show`]; the first one is played).
-    pub const SHOW: Self = Self(3);
+    pub const SHOW: Self = Self(4);
 }
 
 /// One blob of a region.

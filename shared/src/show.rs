@@ -27,7 +27,7 @@
 //! | 28 + 4 · `C` | 6 · ΣKc | the keys, channel by channel: `frame: u32`, `target: u16`; a channel's first key at frame 0, its last at `F − 1`, frames strictly increasing (one key: `F` = 1) |
 //! | end − 4 | 4 | CRC-32/ISO-HDLC of every byte before it |
 //!
-//! A show sits in the table region as an entry of kind 3
+//! A show sits in the table region as an entry of kind 4
 //! ([`crate::region::EntryKind::SHOW`]); readers of region version 1 that
 //! do not know it skip it.
 
