@@ -782,7 +782,9 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
     /// follows its target for `frame` through its slew limiter
     /// ([`Slew::track`]: never outside its calibrated range, never faster
     /// than its speed limit); a servo the show does not drive goes back to
-    /// rest the same way. Any jog ends.
+    /// rest the same way. Any jog ends. Never inlined: kept out of the
+    /// frame's path.
+    #[inline(never)]
     pub fn play_step(&mut self, show: &Show<'_>, cursor: &mut ShowCursor, frame: u32) {
         let period = self.rig.frame_period_s();
         self.set_step(period);

@@ -336,7 +336,9 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
 
     /// Starts the flashed show from its first frame (a trigger: a button,
     /// or the host); false if there is none, the board is armed, or it
-    /// cannot drive its rig.
+    /// cannot drive its rig. Never inlined: a cold path kept out of the
+    /// frame's.
+    #[inline(never)]
     pub fn play_show(&mut self) -> bool {
         let ok = self.show.is_some() && !self.armed && !self.refused;
         if ok {
@@ -351,7 +353,9 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         self.playing = None;
     }
 
-    /// One frame of the show (see [Shows](self#shows)).
+    /// One frame of the show (see [Shows](self#shows)). Never inlined (as
+    /// [`Performer::play_show`]).
+    #[inline(never)]
     fn show_tick(&mut self, frame: u32) -> Update {
         let (Some(show), Some(pipeline)) = (&self.show, &mut self.pipeline) else {
             self.playing = None;
