@@ -19,8 +19,11 @@ use std::{env, fs};
 /// The firmware's target triple (as in `firmware/.cargo/config.toml`).
 const TARGET: &str = "thumbv7em-none-eabihf";
 /// The demo's data, relative to the repository root.
-const DEMO_DATA: [&str; 8] = [
+const DEMO_DATA: [&str; 11] = [
     "data/builds/reach_humanoid16.toml",
+    "data/builds/walk_humanoid16.toml",
+    "data/cmu_16_walk_run/16_21.bvh",
+    "data/cmu_16_walk_run/16_45.bvh",
     "data/hdm05_bk/HDM_bk.asf",
     "data/hdm05_bk/HDM_bk_grabHighR_005_120.amc",
     "data/hdm05_bk/HDM_bk_grabHighR_006_120.amc",

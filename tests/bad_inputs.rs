@@ -15,7 +15,7 @@
 
 use marionette_core::solve::Solver;
 use marionette_host::build::error::{InputError, Source};
-use marionette_host::build::{examples, spec};
+use marionette_host::build::{self, examples, spec};
 use marionette_host::cmd::solve;
 use marionette_host::rigfile::{self, RigFile};
 use marionette_tests::fuzz_targets::HUMANOID16_TOML;
@@ -389,16 +389,23 @@ fn bad_build_specs_name_file_line_and_field() {
             "skeleton = \"a.asf\"",
             "skeleton = 5",
             5,
-            "skeleton",
+            "mocap.skeleton",
             "invalid type",
         ),
-        case("TOML syntax", "every = 2", "every = = 2", 6, "every", ""),
+        case(
+            "TOML syntax",
+            "every = 2",
+            "every = = 2",
+            6,
+            "mocap.every",
+            "",
+        ),
         case(
             "duplicate key",
             "every = 2",
             "every = 2\nevery = 3",
             7,
-            "every",
+            "mocap.every",
             "duplicate",
         ),
         case(
@@ -454,7 +461,7 @@ fn bad_build_specs_name_file_line_and_field() {
             "count = 4",
             "count = 70000",
             16,
-            "count",
+            "axis[0].count",
             "",
         ),
         case(
@@ -618,4 +625,202 @@ fn broken_goals_files_never_panic_and_every_error_names_the_file() {
         }
     }
     assert!(errors > 0);
+}
+
+// ------------------------------------------- build errors found while loading
+
+/// The bundled data folder.
+fn data(relative: &str) -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../data")
+        .join(relative)
+        .display()
+        .to_string()
+}
+
+/// A clips spec over two BVH files, with `extra` appended.
+fn clips_spec(mocap: &str, a: &str, b: &str, extra: &str) -> String {
+    format!(
+        "kind = \"clips\"\n[mocap]\n{mocap}\n[[clip]]\nfile = \"{a}\"\ncut = [0, 100]\n\
+         [[clip]]\nfile = \"{b}\"\ncut = [0, 100]\n[[axis]]\nname = \"speed\"\n\
+         measure = \"speed\"\ncount = 2\n{extra}\n"
+    )
+}
+
+/// A grid spec over HDM05 with the skeleton `asf` and the clip `amc`.
+fn grid_spec(asf: &str, amc: &str) -> String {
+    format!(
+        "kind = \"grid\"\n[mocap]\nskeleton = \"{asf}\"\n[[clip]]\nfile = \"{amc}\"\n\
+         [[axis]]\nname = \"x\"\nsegment = \"rhand\"\ncomponent = \"x\"\ncount = 3\n"
+    )
+}
+
+/// `build::load` of a spec text (in `dir`); its error as text.
+fn load_error(text: &str, dir: &std::path::Path) -> String {
+    let src = Source {
+        file: "spec.toml".into(),
+        text: text.into(),
+    };
+    let spec = spec::parse(src, dir.to_path_buf()).unwrap_or_else(|e| panic!("parse: {e}"));
+    match build::load(&spec, &build::Progress::new(false)) {
+        Ok(_) => panic!("loaded:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// Every error `marionette build SPEC` finds past the spec's own syntax, in
+/// a mocap file, a skeleton, a rig file or the table's name rules, names
+/// the spec, the line of the field that brought it in and that field; a
+/// mocap file's error also keeps that file's own line.
+#[test]
+fn build_errors_name_the_spec_line_and_field_and_the_mocap_files_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let put = |name: &str, text: String| {
+        std::fs::write(dir.path().join(name), text).unwrap();
+        name.to_owned()
+    };
+    let walk = data("cmu_02_01_walk/02_01.bvh");
+    let run = data("cmu_16_walk_run/16_21.bvh");
+    let bvh_text = std::fs::read_to_string(&walk).unwrap();
+    let asf_text = std::fs::read_to_string(data("hdm05_bk/HDM_bk.asf")).unwrap();
+    let amc_path = data("hdm05_bk/HDM_bk_grabHighR_005_120.amc");
+    // Latin-1 (HDM05's AMC headers hold a 0xFC byte).
+    let amc_text: String = std::fs::read(&amc_path)
+        .unwrap()
+        .iter()
+        .map(|&b| char::from(b))
+        .collect();
+    let line_of =
+        |text: &str, needle: &str| 1 + text.lines().position(|l| l.contains(needle)).unwrap();
+    let bad_bvh = put(
+        "bad.bvh",
+        bvh_text.replacen("OFFSET 1.363060", "OFFSET x", 1),
+    );
+    let bvh_line = line_of(&bvh_text, "OFFSET 1.363060");
+    let bad_asf = put(
+        "bad.asf",
+        asf_text.replacen("length 7.88132", "length x", 1),
+    );
+    let asf_line = line_of(&asf_text, "length 7.88132");
+    // The AMC's 30th line: its first number becomes `zz`.
+    let amc_lines: Vec<String> = amc_text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| match (i, l.split_once(' ')) {
+            (29, Some((bone, rest))) => {
+                let tail = rest.split_once(' ').map_or("", |(_, t)| t);
+                format!("{bone} zz {tail}")
+            }
+            _ => l.to_owned(),
+        })
+        .collect();
+    let bad_amc = "bad.amc".to_owned();
+    let bytes: Vec<u8> = amc_lines.join("\n").chars().map(|c| c as u8).collect();
+    std::fs::write(dir.path().join(&bad_amc), bytes).unwrap();
+    let bad_rig = put("rig.toml", "name = \"x\"\n".into());
+    let cc = data("cmu_subject07_walk_speeds_ccrig/007_04.bvh");
+    let cc2 = data("cmu_subject07_walk_speeds_ccrig/007_12.bvh");
+    let pruning = "[rig]\ndrop = [\"*Twist*\", \"*Toe1\", \"*Mid*\", \"*Index*\", \"*Ring*\", \
+                   \"*Pinky*\", \"*Thumb*\", \"*Facial*\", \"*Jaw*\", \"*Tongue*\", \"*Teeth*\", \
+                   \"*Eye\", \"*Breast\"]";
+    // (what, spec, the error's start, what it must also say)
+    let cases: Vec<(&str, String, String, Vec<String>)> = vec![
+        (
+            "a malformed BVH clip",
+            clips_spec("", &walk, &bad_bvh, ""),
+            "spec.toml:8: clip[1].file: ".into(),
+            vec![format!("bad.bvh:{bvh_line}:"), "LeftUpLeg OFFSET".into()],
+        ),
+        (
+            "a missing clip",
+            clips_spec("", "nothere.bvh", &run, ""),
+            "spec.toml:5: clip[0].file: ".into(),
+            vec!["nothere.bvh".into(), "cannot read".into()],
+        ),
+        (
+            "a malformed ASF skeleton",
+            grid_spec(&bad_asf, &amc_path),
+            "spec.toml:3: mocap.skeleton: ".into(),
+            vec![format!("bad.asf:{asf_line}:"), "bone length".into()],
+        ),
+        (
+            "a malformed AMC clip",
+            grid_spec(&data("hdm05_bk/HDM_bk.asf"), &bad_amc),
+            "spec.toml:5: clip[0].file: ".into(),
+            vec!["bad.amc:30:".into(), "\"zz\"".into()],
+        ),
+        (
+            "a rig file that does not load",
+            clips_spec("", &walk, &run, &format!("[rig]\nfile = \"{bad_rig}\"")),
+            "spec.toml:15: rig.file: ".into(),
+            vec!["rig.toml:1:".into(), "frame_period_us".into()],
+        ),
+        (
+            "100 joints and no [rig] table",
+            clips_spec("scale = 0.01", &cc, &cc2, ""),
+            "spec.toml:5: clip[0].file: ".into(),
+            vec![
+                "100 segments".into(),
+                "in a [rig] table".into(),
+                "drop = ".into(),
+            ],
+        ),
+        (
+            "a 26-byte joint name kept",
+            clips_spec("scale = 0.01", &cc, &cc2, pruning),
+            "spec.toml:14: rig.strip_prefix: ".into(),
+            vec![
+                "\"CC_Base_L_ToeBaseShareBone\"".into(),
+                "longer than 24 bytes".into(),
+                "strip_prefix = \"CC_Base_\"".into(),
+                "rename = { CC_Base_L_ToeBaseShareBone = ".into(),
+            ],
+        ),
+        (
+            "the 26-byte name after stripping the prefix, renamed too long",
+            clips_spec(
+                "scale = 0.01",
+                &cc,
+                &cc2,
+                &format!(
+                    "{pruning}\nstrip_prefix = \"CC_Base_\"\nrename = {{ L_ToeBaseShareBone = \"a_26_byte_segment_name_xx\" }}"
+                ),
+            ),
+            "spec.toml:17: rig.rename: ".into(),
+            vec!["rename = { L_ToeBaseShareBone = ".into()],
+        ),
+    ];
+    // Found while building: axes whose range holds no example.
+    let far = grid_spec(&data("hdm05_bk/HDM_bk.asf"), &amc_path)
+        .replace("count = 3", "count = 3\nmin = 5.0\nmax = 6.0")
+        .replace("[mocap]\n", "[mocap]\nevery = 8\n")
+        + "[resample]\nvalid_radius = 0.5\n";
+    let src = Source {
+        file: "spec.toml".into(),
+        text: far.clone(),
+    };
+    let spec = spec::parse(src, dir.path().to_path_buf()).unwrap();
+    let progress = build::Progress::new(false);
+    let loaded = build::load(&spec, &progress).unwrap();
+    let e = build::build(&spec, &loaded, None, &progress)
+        .unwrap_err()
+        .to_string();
+    let line = 1 + far
+        .lines()
+        .position(|l| l.starts_with("valid_radius"))
+        .unwrap();
+    assert!(
+        e.starts_with(&format!(
+            "spec.toml:{line}: resample.valid_radius: every grid cell"
+        )),
+        "{e}"
+    );
+    let mut failures = Vec::new();
+    for (what, text, start, needles) in &cases {
+        let e = load_error(text, dir.path());
+        if !e.starts_with(start.as_str()) || needles.iter().any(|n| !e.contains(n.as_str())) {
+            failures.push(format!("{what}: want {start:?} and {needles:?}, got {e:?}"));
+        }
+    }
+    assert!(failures.is_empty(), "\n{}", failures.join("\n"));
 }

@@ -617,12 +617,16 @@ fn slope_walks_loop_in_place_store_their_climb_and_take_a_per_clip_rate() {
         panic!("a mocap spec")
     };
     let mocap = build::mocap::load(&spec, m, &|_| {}).unwrap();
-    for (clip, (name, slope)) in mocap.clips.iter().zip([("74_15", 7.0f32), ("74_19", 13.0)]) {
+    let clips = [("74_15", 7.0f32), ("74_19", 13.0)];
+    for ((clip, (name, slope)), seam) in mocap.clips.iter().zip(clips).zip(&data.seams) {
         assert_eq!(clip.name, name);
-        let moved = clip.poses[204][0].0 - clip.poses[120][0].0;
+        // The stride the build chose (`seam_search`; see the seam test).
+        let [a, b] = seam.chosen;
+        let moved = clip.poses[b][0].0 - clip.poses[a][0].0;
         let s = query::synthesize(&table, &[slope], None).unwrap();
-        // 84 frames at 60 fps, for 74_19 too (`fps = 60` on the clip).
-        assert!((s.duration.unwrap() - 1.4).abs() < 1e-4, "{name}: {s:?}");
+        // b − a frames at 60 fps, for 74_19 too (`fps = 60` on the clip).
+        let want = (b - a) as f32 / 60.0;
+        assert!((s.duration.unwrap() - want).abs() < 1e-4, "{name}: {s:?}");
         let [x, y, z] = s.travel.expect("a loop stores its travel");
         // Heading frame: y is up (the climb), z the direction of travel.
         assert!(
@@ -679,7 +683,9 @@ fn slope_walks_loop_in_place_store_their_climb_and_take_a_per_clip_rate() {
     let built = build::build(&spec, &data, None, &progress).unwrap();
     let table = Table::parse(&built.blob).unwrap();
     let s = query::synthesize(&table, &[13.0], None).unwrap();
-    assert!((s.duration.unwrap() - 0.7).abs() < 1e-4, "{s:?}");
+    let [a, b] = data.seams[1].chosen;
+    let want = (b - a) as f32 / 120.0;
+    assert!((s.duration.unwrap() - want).abs() < 1e-4, "{s:?}");
 }
 
 /// The bundled iClone walks (CMU subject 07 on a 100-joint `CC_Base_*` rig):
@@ -746,4 +752,122 @@ fn iclone_walks_build_onto_a_renamed_pruned_rig() {
         e.starts_with("walk_ccrig.toml:18: rig.rename:") && e.contains("\"Head\""),
         "{e}"
     );
+}
+
+/// Per-joint steps between the stored frames of a looping table at
+/// `params`, the cycle's root travel added back (frame `i` of the `K`
+/// stored ones stands `travel · i / K` further on, and the next cycle's
+/// frame 0 a whole `travel` on): step `i` is the mean over segments of
+/// `|p((i + 1) mod K) − p(i) + travel / K|`, for `i` in `0..K`; step
+/// `K − 1` crosses the seam.
+fn loop_steps(table: &Table, params: &[f32]) -> Vec<f64> {
+    let (frames, s) = query::frames(table, params).unwrap();
+    let k = frames.len();
+    let t = s.travel.expect("a looping table");
+    let per = glam::Vec3::from_array(t) / k as f32;
+    (0..k)
+        .map(|i| {
+            let (a, b) = (&frames[i], &frames[(i + 1) % k]);
+            let sum: f64 = a
+                .iter()
+                .zip(b)
+                .map(|(a, b)| f64::from((b.0 - a.0 + per).length()))
+                .sum();
+            sum / a.len() as f64
+        })
+        .collect()
+}
+
+/// The largest step within `window` frames of the seam, and the mean step
+/// elsewhere (m).
+fn seam_figures(steps: &[f64], window: usize) -> (f64, f64) {
+    let k = steps.len();
+    let near = |i: usize| i < window || i >= k - window;
+    let seam = (0..k)
+        .filter(|&i| near(i))
+        .map(|i| steps[i])
+        .fold(0.0, f64::max);
+    let rest: Vec<f64> = (0..k).filter(|&i| !near(i)).map(|i| steps[i]).collect();
+    (seam, rest.iter().sum::<f64>() / rest.len() as f64)
+}
+
+/// A seam's jump, computed here from the imported clip: the mean over the
+/// segments (the root counting as zero) of how far each segment's position
+/// relative to the root at frame `b` is from the one at frame `a`; and the
+/// mean per-joint step between consecutive frames of `a..=b`.
+fn jump_and_step(poses: &[Vec<(glam::DVec3, glam::DQuat)>], a: usize, b: usize) -> (f64, f64) {
+    let n = poses[a].len();
+    let jump = (1..n)
+        .map(|j| {
+            let ra = poses[a][j].0 - poses[a][0].0;
+            let rb = poses[b][j].0 - poses[b][0].0;
+            (rb - ra).length()
+        })
+        .sum::<f64>()
+        / n as f64;
+    let mut steps = Vec::new();
+    for w in poses[a..=b].windows(2) {
+        for (p, q) in w[0].iter().zip(&w[1]) {
+            steps.push((q.0 - p.0).length());
+        }
+    }
+    (jump, steps.iter().sum::<f64>() / steps.len() as f64)
+}
+
+/// The bundled slope walks' loops (#16 item 3): with `seam_search` the
+/// build moves each clip's cut to the stride whose ends match, so the seam
+/// jump (computed here from the imported clips) drops to about two frame
+/// steps, and the stored loop's step across the seam (measured here on
+/// the table's frames, travel added back) is an ordinary one.
+#[test]
+fn slope_walk_loops_are_cut_where_the_stride_closes() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let path = root.join("data/builds/slope_walk.toml");
+    let (data, built, spec) = load_and_build(&path);
+    let spec::Input::Mocap(m) = &spec.input else {
+        panic!("a mocap spec")
+    };
+    let mocap = build::mocap::load(&spec, m, &|_| {}).unwrap();
+    // The same spec without the search: the cut as given.
+    let text = std::fs::read_to_string(&path).unwrap();
+    let plain: Vec<&str> = text
+        .lines()
+        .filter(|l| !l.starts_with("seam_search"))
+        .collect();
+    let src = build::error::Source {
+        file: "slope_walk.toml".into(),
+        text: plain.join("\n"),
+    };
+    let plain_spec = spec::parse(src, root.join("data/builds")).unwrap();
+    let progress = Progress::new(false);
+    let plain_data = build::load(&plain_spec, &progress).unwrap();
+    let plain_built = build::build(&plain_spec, &plain_data, None, &progress).unwrap();
+    let table = Table::parse(&built.blob).unwrap();
+    let plain_table = Table::parse(&plain_built.blob).unwrap();
+    let window = spec.motion.seam_window + 1;
+    assert_eq!(data.seams.len(), 2);
+    for ((clip, seam), slope) in mocap.clips.iter().zip(&data.seams).zip([7.0f32, 13.0]) {
+        assert_eq!(seam.given, [120, 204], "the spec's cut");
+        let (given, _) = jump_and_step(&clip.poses, 120, 204);
+        let [a, b] = seam.chosen;
+        let (jump, step) = jump_and_step(&clip.poses, a, b);
+        assert!(a.abs_diff(120) <= 60 && b.abs_diff(204) <= 60, "{seam:?}");
+        // The build reports what is measured here.
+        assert!((seam.jump_given - given).abs() < 1e-9 && (seam.jump_chosen - jump).abs() < 1e-9);
+        assert!(
+            jump < 0.4 * given && jump < 2.5 * step,
+            "{}: jump {jump} m (given cut {given} m), frame step {step} m",
+            clip.name
+        );
+        // Still one stride of the 60 fps walk (~1.4 s).
+        assert!(((b - a) as f64 / 60.0 - 1.4).abs() < 0.15, "{seam:?}");
+        let (seam_step, ordinary) = seam_figures(&loop_steps(&table, &[slope]), window);
+        let (plain_seam, plain_ordinary) =
+            seam_figures(&loop_steps(&plain_table, &[slope]), window);
+        assert!(
+            seam_step < 1.2 * ordinary && seam_step / ordinary < plain_seam / plain_ordinary,
+            "{}: seam step {seam_step} m vs {ordinary} m (as given: {plain_seam} vs {plain_ordinary})",
+            clip.name
+        );
+    }
 }

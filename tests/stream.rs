@@ -47,6 +47,7 @@ fn stream_at_1_khz_over_a_pty_drops_frames_never_stalls_and_matches_sim() {
         frame: Framing::Compact,
         out: dir.path().to_path_buf(),
         json: false,
+        view: Default::default(),
     };
     let t0 = Instant::now();
     let (summary, replies) = stream::stream(&args).expect("stream completes");

@@ -11,6 +11,7 @@ use crate::{perform, rigfile};
 use marionette_core::deadline::Budget;
 use marionette_core::frame::Region;
 use marionette_core::perform::Performer;
+use marionette_core::region;
 use marionette_core::solve::SolverState;
 use serde::Serialize;
 use std::time::Duration;
@@ -139,7 +140,35 @@ pub fn bench_region() -> Result<Vec<u8>, IcountError> {
         ("hand_z", -0.1, 0.15, 5),
     ];
     let table = perform::rest_grid(&rig, &axes).map_err(|e| IcountError::Region(e.to_string()))?;
-    Ok(perform::region(&blob, Some(&table)))
+    let layered = layered_bench_region(&rig, &table)?;
+    // The nested region before the table, so that the table stays the
+    // region's last blob.
+    let entries = [
+        region::Entry::rig(&blob),
+        region::Entry {
+            kind: region::EntryKind::NESTED,
+            bytes: &layered,
+        },
+        region::Entry::table(&table),
+    ];
+    let mut out = vec![0u8; region::len(&entries).map_err(|e| IcountError::Region(e.to_string()))?];
+    let n = region::write(&entries, &mut out).map_err(|e| IcountError::Region(e.to_string()))?;
+    out.truncate(n);
+    Ok(out)
+}
+
+/// The bench's two-layer region (nested in [`bench_region`] as
+/// [`region::EntryKind::NESTED`], which the live loop ignores): the same
+/// rig, the walk clip table built from the bundled
+/// `data/builds/walk_humanoid16.toml` on the legs, and the rest grid `grid`
+/// on the right arm, as `marionette demo --layers` lays them out
+/// ([`crate::cmd::demo::layered_region`]).
+pub fn layered_bench_region(rig: &rigfile::RigFile, grid: &[u8]) -> Result<Vec<u8>, IcountError> {
+    let spec = bundled("data/builds/walk_humanoid16.toml")?;
+    let walk =
+        crate::cmd::demo::build_table(&spec).map_err(|e| IcountError::Region(e.to_string()))?;
+    crate::cmd::demo::layered_region(rig, grid, &walk.blob, 2.0)
+        .map_err(|e| IcountError::Region(e.to_string()))
 }
 
 /// The path of a file built into marionette (see [`crate::bundle`]).
@@ -173,18 +202,33 @@ pub fn run_bench() -> Result<String, IcountError> {
 /// time steps of the bundled tracker recording performed on the bench's
 /// table region (the whole live loop, fail-safe easing included).
 pub fn perform_stack(frames: usize) -> Result<Option<u32>, IcountError> {
+    perform_stack_on(&bench_region()?, frames)
+}
+
+/// [`perform_stack`] on the bench's two-layer region
+/// ([`layered_bench_region`]).
+pub fn perform_stack_layers(frames: usize) -> Result<Option<u32>, IcountError> {
+    let bench = bench_region()?;
+    let nested = region::directory(&bench)
+        .ok()
+        .and_then(|d| d.find(region::EntryKind::NESTED, 0))
+        .ok_or_else(|| IcountError::Region("the bench region nests no layered region".into()))?;
+    perform_stack_on(nested.bytes, frames)
+}
+
+/// [`perform_stack`] on the table region `region`.
+fn perform_stack_on(region: &[u8], frames: usize) -> Result<Option<u32>, IcountError> {
     let recording = bundled("data/recordings/reach_hdm05_007.csv")?;
     let samples = crate::import::csv::read_tracker_csv(&recording)?;
     let mut all = perform::frames(&samples)?;
     all.truncate(frames);
     let session = perform::session(&all)?;
-    let region = bench_region()?;
     // Channels per output frame: as many as the core's loop drives.
-    let channels = Performer::new(&Region::parse(&region), &mut SolverState::new())
+    let channels = Performer::new(&Region::parse(region), &mut SolverState::new())
         .targets()
         .len();
     let mut file = tempfile::NamedTempFile::new().map_err(QemuError::Io)?;
-    std::io::Write::write_all(&mut file, &region).map_err(QemuError::Io)?;
+    std::io::Write::write_all(&mut file, region).map_err(QemuError::Io)?;
     let (run, _) = perform::emulate(
         file.path(),
         &session,

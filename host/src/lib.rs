@@ -17,6 +17,7 @@ pub mod link;
 pub mod live;
 pub mod locate;
 pub mod perform;
+pub mod progress;
 pub mod qemu;
 pub mod refusal;
 pub mod render;
@@ -24,4 +25,7 @@ pub mod rigfile;
 pub mod save;
 pub mod sender;
 pub mod show;
+pub mod skeleton;
 pub mod take;
+#[cfg(feature = "view")]
+pub mod view;

@@ -50,7 +50,7 @@ enum Command {
     Record(cmd::record::Args),
     /// Find a servo's limits from the keyboard on a board (or the emulated one) and write them into the rig file.
     Calibrate(cmd::calibrate::Args),
-    /// Check a rig file: summary, hash, which boards can drive it, likely slips.
+    /// Check a rig file (summary, hash, which boards can drive it, likely slips), or write one from a mocap skeleton (`--from-skeleton`).
     Rig(cmd::rig::Args),
     /// Perform from a live source (VMC / OSC over UDP) on the emulated or a real board.
     Live(cmd::live::Args),
@@ -60,6 +60,8 @@ enum Command {
     Replay(cmd::replay::Args),
     /// Shows played from flash with no host: `build` one from takes.
     Show(cmd::show::Args),
+    /// The demo watched live in the browser (`demo --view`; read-only, localhost by default).
+    View(cmd::demo::Args),
 }
 
 fn main() -> ExitCode {
@@ -84,6 +86,10 @@ fn main() -> ExitCode {
         Command::Take(args) => cmd::take::run(&args),
         Command::Replay(args) => cmd::replay::run(&args),
         Command::Show(args) => cmd::show::run(&args),
+        Command::View(mut args) => {
+            args.view.view = true;
+            cmd::demo::run(&args)
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

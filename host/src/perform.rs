@@ -829,6 +829,28 @@ pub fn emulate(
     pacing: Pacing,
     pause: Duration,
 ) -> Result<(Run, Vec<u8>), PerformError> {
+    emulate_watched(
+        region_file,
+        session,
+        channels,
+        frames,
+        pacing,
+        pause,
+        &|_| (),
+    )
+}
+
+/// [`emulate`], showing `watch` the board's links ([`qemu::Taps`]) after
+/// every message sent and every look while waiting for the servo bytes.
+pub fn emulate_watched(
+    region_file: &Path,
+    session: &[Sent],
+    channels: usize,
+    frames: usize,
+    pacing: Pacing,
+    pause: Duration,
+    watch: &dyn Fn(&qemu::Taps),
+) -> Result<(Run, Vec<u8>), PerformError> {
     let region_bytes = std::fs::read(region_file).map_err(|source| PerformError::Io {
         path: region_file.display().to_string(),
         source,
@@ -867,9 +889,22 @@ pub fn emulate(
         return Ok((run, Vec::new()));
     }
     if arm_accepted(&emulator.replies_so_far()) {
-        pace(frames_part, pacing, |bytes| emulator.send(bytes))?;
+        let progress = crate::progress::Progress::new(true);
+        progress.stage("emulated board: servo frames", frames);
+        let per_frame = format.bytes_for(1).max(1);
+        let taps = emulator.taps();
+        pace(frames_part, pacing, |bytes| {
+            emulator.send(bytes)?;
+            progress.set(emulator.servo_bytes() / per_frame);
+            watch(&taps);
+            Ok::<(), qemu::QemuError>(())
+        })?;
         // Let the board finish the frames before it is told to stop.
-        emulator.wait_servo_bytes(format.bytes_for(frames))?;
+        emulator.wait_servo_bytes_with(format.bytes_for(frames), &|got| {
+            progress.set(got / per_frame);
+            watch(&taps);
+        })?;
+        progress.finish();
         std::thread::sleep(pause);
     }
     for sent in last {

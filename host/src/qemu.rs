@@ -159,6 +159,39 @@ impl Collected {
     }
 }
 
+/// A look at what a running board has sent so far, for watching a session
+/// while it runs (the live view); reading never takes anything away.
+#[derive(Clone)]
+pub struct Taps {
+    servo: Collected,
+    tracker: Collected,
+}
+
+impl Taps {
+    /// Bytes sent on the servo bus so far.
+    #[must_use]
+    pub fn servo_len(&self) -> usize {
+        self.servo.len()
+    }
+
+    /// A copy of servo-bus bytes `range` (empty if not all there yet).
+    #[must_use]
+    pub fn servo_bytes(&self, range: std::ops::Range<usize>) -> Vec<u8> {
+        self.servo
+            .0
+            .lock()
+            .ok()
+            .and_then(|v| v.get(range).map(<[u8]>::to_vec))
+            .unwrap_or_default()
+    }
+
+    /// A copy of the replies on the tracker link so far.
+    #[must_use]
+    pub fn replies(&self) -> Vec<u8> {
+        self.tracker.0.lock().map(|v| v.clone()).unwrap_or_default()
+    }
+}
+
 /// What a finished run produced.
 #[derive(Clone, Debug)]
 pub struct Output {
@@ -268,7 +301,22 @@ impl Emulator {
     /// Waits until the board has sent at least `n` bytes on the servo bus, or
     /// has exited.
     pub fn wait_servo_bytes(&mut self, n: usize) -> Result<(), QemuError> {
-        while self.servo_out.len() < n {
+        self.wait_servo_bytes_with(n, &|_| ())
+    }
+
+    /// As [`Emulator::wait_servo_bytes`], telling `seen` how many bytes have
+    /// come so far each time it looks.
+    pub fn wait_servo_bytes_with(
+        &mut self,
+        n: usize,
+        seen: &dyn Fn(usize),
+    ) -> Result<(), QemuError> {
+        loop {
+            let got = self.servo_out.len();
+            seen(got);
+            if got >= n {
+                break;
+            }
             self.remaining()?;
             if self.child.try_wait()?.is_some() {
                 break;
@@ -276,6 +324,21 @@ impl Emulator {
             thread::sleep(Duration::from_millis(1));
         }
         Ok(())
+    }
+
+    /// A [`Taps`] on this board's links.
+    #[must_use]
+    pub fn taps(&self) -> Taps {
+        Taps {
+            servo: self.servo_out.clone(),
+            tracker: self.tracker_out.clone(),
+        }
+    }
+
+    /// How many bytes the board has sent on the servo bus so far.
+    #[must_use]
+    pub fn servo_bytes(&self) -> usize {
+        self.servo_out.len()
     }
 
     /// Waits until the bytes the board has sent on its tracker link (its

@@ -411,6 +411,18 @@ pub fn precheck(name: &str, region: &[u8], board: &Board) -> Option<Stop> {
     None
 }
 
+/// With `--json`, prints `{"board": …}` (the [`BoardReport`]) for an error
+/// that is a board's [`Stop`], so that scripts read the reason too; the
+/// error itself still ends the command with the stop's exit code.
+pub fn print_json_stop(error: &(dyn std::error::Error + 'static), json: bool) {
+    if let (true, Some(stop)) = (json, error.downcast_ref::<Stop>())
+        && let Ok(text) =
+            serde_json::to_string_pretty(&serde_json::json!({ "board": stop.report() }))
+    {
+        println!("{text}");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -236,3 +236,40 @@ fn a_recording_beyond_the_wire_clock_is_refused_before_streaming() {
         "{err}"
     );
 }
+
+/// `stream` to a board (the emulated one on a pty, as a real board's
+/// serial port) whose flash holds a rig but no table: the board answers
+/// `Hello` with `NoTable`, and `stream` says so, with what to do, exits 3
+/// and carries the reason in `--json`, as `emulate` does.
+#[test]
+fn stream_says_why_the_board_never_arms() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = short_recording(dir.path());
+    let rig_path = repo().join("rigs/humanoid16.toml");
+    let rig = rigfile::load(&rig_path).unwrap();
+    let mut blob = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
+    let n = rig.desc().to_blob(&mut blob).unwrap();
+    let region_file = dir.path().join("region.bin");
+    std::fs::write(&region_file, perform::region(&blob[..n], None)).unwrap();
+    let elf = marionette_host::qemu::firmware_elf("perform").unwrap();
+    let board =
+        marionette_host::qemu::PtyBoard::start(&elf, &region_file, &dir.path().join("uart1.bin"))
+            .unwrap();
+    let out = dir.path().join("out");
+    refused(
+        &[
+            "stream",
+            "--port",
+            s(board.pty()),
+            "--recording",
+            s(&rec),
+            "--rig",
+            s(&rig_path),
+            "--out",
+            s(&out),
+        ],
+        "NoTable",
+        "the board on /dev/",
+    );
+    assert!(!out.join("sent.csv").exists(), "nothing was streamed");
+}

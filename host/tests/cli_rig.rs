@@ -313,3 +313,280 @@ fn a_json_example_set_built_for_a_rig_file_has_the_rigs_hash() {
         "{err}"
     );
 }
+
+// ---------------------------------------------------------------------------
+// `rig --from-skeleton` (#16 item 5). References are read here from the
+// skeleton files' text: joint and channel counts, OFFSETs.
+
+/// `rig --from-skeleton SKELETON -o OUT` plus `extra`.
+fn from_skeleton(skeleton: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["rig", "--from-skeleton", s(skeleton), "-o", s(out)];
+    args.extend_from_slice(extra);
+    marionette(&args)
+}
+
+fn ok(o: &Output) -> String {
+    assert!(
+        o.status.success(),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// `solve RIG` with one goal pulling `segment` to `target`; the goal's
+/// distance after solving, m.
+fn solve_distance(dir: &Path, rig: &Path, segment: &str, target: [f64; 3]) -> f64 {
+    let goals = dir.join(format!("{segment}.json"));
+    let doc = serde_json::json!({"goals": [{"segment": segment, "target": target, "weight": 1}]});
+    std::fs::write(&goals, doc.to_string()).unwrap();
+    let o = marionette(&["solve", s(rig), "--goals", s(&goals), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&ok(&o)).unwrap();
+    v["goals"][0]["distance"].as_f64().unwrap()
+}
+
+/// The rest position of `joint` in a BVH text: the sum of the OFFSETs from
+/// the root down to it (times `scale`), found by walking the braces.
+fn bvh_rest_position(text: &str, joint: &str, scale: f64) -> [f64; 3] {
+    let mut stack: Vec<[f64; 3]> = Vec::new();
+    let mut pending: Option<String> = None;
+    let mut current: Vec<String> = Vec::new();
+    for line in text.lines() {
+        let t: Vec<&str> = line.split_whitespace().collect();
+        match t.first().copied() {
+            Some("ROOT" | "JOINT") => pending = Some(t[1].to_owned()),
+            Some("End") => pending = Some("end".into()),
+            Some("{") => {
+                current.push(pending.take().unwrap());
+                stack.push(*stack.last().unwrap_or(&[0.0; 3]));
+            }
+            Some("}") => {
+                current.pop();
+                stack.pop();
+            }
+            Some("OFFSET") => {
+                let top = stack.last_mut().unwrap();
+                for k in 0..3 {
+                    top[k] += t[k + 1].parse::<f64>().unwrap() * scale;
+                }
+                if current.last().map(String::as_str) == Some(joint) {
+                    return *top;
+                }
+            }
+            Some("MOTION") => break,
+            _ => {}
+        }
+    }
+    panic!("no joint {joint}")
+}
+
+#[test]
+fn a_rig_from_a_bvh_skeleton_loads_passes_rig_check_and_solves() {
+    let dir = tempfile::tempdir().unwrap();
+    let bvh = repo().join("data/cmu_02_01_walk/02_01.bvh");
+    let out = dir.path().join("cmu.toml");
+    let said = ok(&from_skeleton(&bvh, &out, &[]));
+    assert!(said.contains("31 segments"), "{said}");
+    // Counted from the file: joints (End Sites excluded) and the rotation
+    // channels of every joint but the root.
+    let text = std::fs::read_to_string(&bvh).unwrap();
+    let hierarchy = text.split("MOTION").next().unwrap();
+    let joints = hierarchy
+        .lines()
+        .filter(|l| l.trim_start().starts_with("ROOT") || l.trim_start().starts_with("JOINT"))
+        .count();
+    let rotations: usize = hierarchy
+        .lines()
+        .filter(|l| l.trim_start().starts_with("CHANNELS"))
+        .skip(1)
+        .map(|l| l.matches("rotation").count())
+        .sum();
+    let rig = rigfile::load(&out).unwrap_or_else(|e| panic!("{e}"));
+    let desc = rig.desc();
+    assert_eq!(desc.segments.len(), joints);
+    let dofs: usize = desc.segments.iter().map(|s| s.dofs.len()).sum();
+    assert_eq!(dofs, rotations);
+    // LeftUpLeg's origin is its OFFSET in metres (CMU unit 0.0254/0.45 m).
+    let unit = 0.0254 / 0.45;
+    let leg = desc
+        .segments
+        .iter()
+        .find(|s| s.name == "LeftUpLeg")
+        .unwrap();
+    for (got, want) in leg.origin.iter().zip([1.363060, -1.794630, 0.839290]) {
+        assert!(
+            (f64::from(*got) - want * unit).abs() < 2e-6,
+            "{:?}",
+            leg.origin
+        );
+    }
+    // The DOFs follow the channel order Zrotation Yrotation Xrotation.
+    let axes: Vec<String> = leg.dofs.iter().map(|d| format!("{:?}", d.axis)).collect();
+    assert_eq!(axes, ["Z", "Y", "X"]);
+    let text_out = std::fs::read_to_string(&out).unwrap();
+    assert!(text_out.contains("EDIT"), "comments mark what to edit");
+    let o = marionette(&["rig", "check", s(&out)]);
+    let report = ok(&o);
+    assert!(report.contains("0 error(s)"), "{report}");
+    // Solve: the right hand 15 cm forward and 20 cm up from its rest
+    // position (the rig's root_position plus the OFFSET chain, here).
+    let rest = bvh_rest_position(&text, "RightHand", unit);
+    let root_y = f64::from(desc.root_position[1]);
+    let target = [rest[0], rest[1] + root_y + 0.2, rest[2] + 0.15];
+    let d = solve_distance(dir.path(), &out, "RightHand", target);
+    assert!(d < 1e-3, "RightHand {d} m from {target:?}");
+    // Its [retarget] map: a spec with `[rig] file` = the written rig builds
+    // a table from CMU walks of the same skeleton, for this rig (its hash).
+    let spec = dir.path().join("walk.toml");
+    let clip = |f: &str| s(&repo().join("data/cmu_16_walk_run").join(f)).to_owned();
+    std::fs::write(
+        &spec,
+        format!(
+            "kind = \"clips\"\n[mocap]\n[rig]\nfile = \"cmu.toml\"\n[[clip]]\nfile = \"{}\"\n\
+             cut = [121, 235]\n[[clip]]\nfile = \"{}\"\ncut = [19, 103]\n[[axis]]\n\
+             name = \"speed\"\nmeasure = \"speed\"\ncount = 2\n[motion]\nframes = 16\n\
+             looping = true\n",
+            clip("16_21.bvh"),
+            clip("16_45.bvh")
+        ),
+    )
+    .unwrap();
+    let table = dir.path().join("walk.bin");
+    ok(&marionette(&["build", s(&spec), "-o", s(&table)]));
+    let check: serde_json::Value =
+        serde_json::from_str(&ok(&marionette(&["rig", "check", s(&out), "--json"]))).unwrap();
+    let inspect: serde_json::Value =
+        serde_json::from_str(&ok(&marionette(&["inspect", s(&table), "--json"]))).unwrap();
+    assert_eq!(inspect["rig_hash"], check["hash"]);
+}
+
+#[test]
+fn a_rig_from_an_asf_skeleton_loads_passes_rig_check_and_solves() {
+    let dir = tempfile::tempdir().unwrap();
+    let asf = repo().join("data/hdm05_bk/HDM_bk.asf");
+    let out = dir.path().join("hdm.toml");
+    ok(&from_skeleton(&asf, &out, &["--name", "hdm05"]));
+    let text = std::fs::read_to_string(&asf).unwrap();
+    let bones = text.lines().filter(|l| l.trim() == "begin").count() - 1; // :hierarchy's begin
+    let dofs_in_file: usize = text
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("dof "))
+        .map(|d| d.split_whitespace().count())
+        .sum();
+    let rig = rigfile::load(&out).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(rig.name(), "hdm05");
+    let desc = rig.desc();
+    assert_eq!(desc.segments.len(), bones + 1, "the root and each bone");
+    let dofs: usize = desc.segments.iter().map(|s| s.dofs.len()).sum();
+    assert_eq!(dofs, dofs_in_file);
+    // ltibia: `dof rx`, limits (-10.0 170.0), axis tilted 20° about z.
+    let tibia = desc.segments.iter().find(|s| s.name == "ltibia").unwrap();
+    assert_eq!(tibia.dofs.len(), 1);
+    let d = tibia.dofs.as_slice()[0];
+    assert_eq!(format!("{:?}", d.axis), "X");
+    assert!((f64::from(d.min).to_degrees() + 10.0).abs() < 1e-3);
+    assert!((f64::from(d.max).to_degrees() - 170.0).abs() < 1e-3);
+    let written = std::fs::read_to_string(&out).unwrap();
+    assert!(
+        written.contains("20.0° from this one"),
+        "the tilt is stated"
+    );
+    let report = ok(&marionette(&["rig", "check", s(&out)]));
+    assert!(report.contains("0 error(s)"), "{report}");
+    let d = solve_distance(dir.path(), &out, "rhand", [-0.3, 1.3, 0.3]);
+    assert!(d < 1e-3, "rhand {d} m off");
+}
+
+#[test]
+fn rig_from_skeleton_refuses_to_overwrite_its_input_or_an_existing_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let bvh = dir.path().join("walk.bvh");
+    std::fs::copy(repo().join("data/cmu_02_01_walk/02_01.bvh"), &bvh).unwrap();
+    let before = std::fs::read(&bvh).unwrap();
+    for extra in [&[][..], &["--force"][..]] {
+        let o = from_skeleton(&bvh, &bvh, extra);
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("refusing to write over the input"), "{err}");
+        assert_eq!(
+            std::fs::read(&bvh).unwrap(),
+            before,
+            "the input is untouched"
+        );
+    }
+    let out = dir.path().join("rig.toml");
+    std::fs::write(&out, "mine").unwrap();
+    let o = from_skeleton(&bvh, &out, &[]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--force"));
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "mine");
+    ok(&from_skeleton(&bvh, &out, &["--force"]));
+    assert!(rigfile::load(&out).is_ok());
+}
+
+#[test]
+fn bad_skeleton_files_are_named_with_their_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("rig.toml");
+    // A BVH whose third OFFSET is not a number (line 12), an ASF whose
+    // lfemur length is not one (line 27 of HDM_bk.asf).
+    let bvh_text = std::fs::read_to_string(repo().join("data/cmu_02_01_walk/02_01.bvh")).unwrap();
+    let asf_text = std::fs::read_to_string(repo().join("data/hdm05_bk/HDM_bk.asf")).unwrap();
+    let cases = [
+        (
+            "bad.bvh",
+            bvh_text.replacen("OFFSET 1.363060", "OFFSET one", 1),
+            "one",
+        ),
+        (
+            "bad.asf",
+            asf_text.replacen("length 7.88132", "length seven", 1),
+            "seven",
+        ),
+    ];
+    for (name, text, token) in cases {
+        let line = 1 + text.lines().position(|l| l.contains(token)).unwrap();
+        let path = dir.path().join(name);
+        std::fs::write(&path, &text).unwrap();
+        let o = from_skeleton(&path, &out, &[]);
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains(&format!("{}:{line}:", path.display())),
+            "{name}: {err}"
+        );
+        assert!(err.contains(token), "{err}");
+        assert!(!out.exists(), "nothing written");
+    }
+    // A joint name over the 24-byte limit names its line and the option.
+    let long = bvh_text.replacen("JOINT LeftUpLeg", "JOINT LeftUpLegWithAVeryLongName", 1);
+    let path = dir.path().join("long.bvh");
+    std::fs::write(&path, &long).unwrap();
+    let line = 1 + long.lines().position(|l| l.contains("VeryLong")).unwrap();
+    let o = from_skeleton(&path, &out, &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains(&format!(":{line}:")), "{err}");
+    assert!(
+        err.contains("--rename LeftUpLegWithAVeryLongName=NEW"),
+        "{err}"
+    );
+    ok(&from_skeleton(
+        &path,
+        &out,
+        &["--rename", "LeftUpLegWithAVeryLongName=LeftUpLeg"],
+    ));
+    assert!(
+        rigfile::load(&out)
+            .unwrap()
+            .segment_names()
+            .contains(&"LeftUpLeg".to_owned())
+    );
+}
+
+#[test]
+fn rig_alone_says_what_to_give() {
+    let o = marionette(&["rig"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--from-skeleton"));
+}

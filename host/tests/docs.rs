@@ -65,7 +65,8 @@ fn every_page_is_listed_and_every_page_has_examples() {
             "rig.md",
             "show.md",
             "spec.md",
-            "take.md"
+            "take.md",
+            "view.md"
         ]
     );
     for p in &pages {
@@ -244,4 +245,41 @@ fn the_show_example_is_the_bytes_the_host_writes_and_decodes() {
     let show = Show::parse(&blob).unwrap();
     assert_eq!(show.target(0, 1), Some(6002));
     assert!(show.looping() && !show.at_boot());
+}
+#[cfg(feature = "view")]
+#[test]
+fn the_view_event_example_is_a_snapshot() {
+    use marionette_host::view::scene::Snapshot;
+    for block in of("view.md", "json") {
+        let s: Snapshot = serde_json::from_str(&block).expect("docs/view.md's example");
+        assert_eq!(s.bones.len(), s.sides.len());
+        // And back: the same keys (the numbers are f32 on the way).
+        let again = serde_json::to_value(&s).unwrap();
+        let given: serde_json::Value = serde_json::from_str(&block).unwrap();
+        assert_eq!(key_paths(&again, ""), key_paths(&given, ""));
+    }
+}
+
+/// Every object key of a JSON value, as paths (`link.state`).
+#[cfg(feature = "view")]
+fn key_paths(v: &serde_json::Value, at: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                let path = format!("{at}.{k}");
+                out.extend(key_paths(x, &path));
+                out.push(path);
+            }
+        }
+        serde_json::Value::Array(items) => {
+            for x in items {
+                out.extend(key_paths(x, &format!("{at}[]")));
+            }
+        }
+        _ => {}
+    }
+    out.sort();
+    out.dedup();
+    out
 }

@@ -1,3 +1,4 @@
+#![cfg(feature = "flash")]
 //! `marionette flash`'s library side: the Black Pill layout, the plan's
 //! refusals, and staging/committing on probe-rs' fake probe.
 //!

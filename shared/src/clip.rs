@@ -299,6 +299,12 @@ impl Motion {
         self.adjust
     }
 
+    /// Whether the motion loops (one cycle, phase in `[0, 1)`).
+    #[must_use]
+    pub fn looping(&self) -> bool {
+        self.looping
+    }
+
     /// Interpolated duration of each phase, seconds.
     #[must_use]
     pub fn durations(&self) -> &[f32] {

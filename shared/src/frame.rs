@@ -36,6 +36,20 @@
 //!   and a [`Slew`] limiter, so no pulse leaves its calibrated range or moves
 //!   faster than the servo's speed and acceleration limits.
 //!
+//! ## Layers
+//!
+//! A region with a layer list ([`crate::layer`]) replaces the synth stage
+//! by the layers: each frame every layer takes its parameters from its
+//! sources (rig parameters after the dials, constants, ramps over the time
+//! performed), moves its effective weight towards its weight source by at
+//! most `dt / fade_s` (the cross-fade), synthesizes its table (a grid query,
+//! or a clip table at its playhead, advanced by `dt` over the cycle duration
+//! interpolated at the parameters), and is blended over the rest pose in
+//! list order, per segment by its mask, in joint-local space. Solve and
+//! servo follow as for one table. The layers start over (phase 0, time 0,
+//! weights at their sources without a fade) whenever the loop disarms or
+//! the fail-safe trips, like the solver's correction.
+//!
 //! ## Time
 //!
 //! One output step is made per performed tracker frame. The slew limits of a
@@ -91,9 +105,11 @@
 //! [`RigTooLarge`](crate::wire::StatusReason::RigTooLarge), like a missing rig: nothing is driven.
 
 use crate::body::{Angles, Body};
+use crate::clip::Clips;
 use crate::deadline::{self, Budget};
 use crate::goal::GoalSet;
 use crate::grid::{Adjust, Grid, Query};
+use crate::layer::{self, Layers, MAX_LAYERS, Playhead, Root};
 pub use crate::perform::{Cause, Performer, Update};
 use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
 pub use crate::region::Region;
@@ -101,7 +117,7 @@ use crate::rig::{Idle, MAX_PARAMS, Rig};
 use crate::servo::{Slew, quarter_us};
 use crate::show::{Cursor as ShowCursor, Show};
 use crate::solve::{self, Solver, SolverState};
-use crate::table::Table;
+use crate::table::{Kind, Table};
 use crate::wire::{List, MAX_GOALS, MAX_SENSORS, MAX_SERVOS, STAGES, Sensor, ValidTrackerFrame};
 use glam::Quat;
 
@@ -269,6 +285,71 @@ struct Jog {
     ending: bool,
 }
 
+/// One layer's state between frames.
+#[derive(Clone, Copy, Debug)]
+struct LayerState {
+    /// A clip layer's place in its motion.
+    playhead: Playhead,
+    /// The effective weight, after the cross-fade.
+    weight: f32,
+    /// Whether a frame has set the weight since the loop started.
+    started: bool,
+}
+
+impl LayerState {
+    const START: Self = Self {
+        playhead: Playhead::START,
+        weight: 0.0,
+        started: false,
+    };
+
+    /// Moves the effective weight towards `target` (clamped to `[0, 1]`;
+    /// NaN is 0) by at most `dt / fade_s`; the first frame after a start
+    /// takes the target at once.
+    fn fade_to(&mut self, target: f32, fade_s: f32, dt: f32) {
+        let target = if target.is_nan() {
+            0.0
+        } else {
+            crate::math::clamp(target, 0.0, 1.0)
+        };
+        self.weight = if !self.started || fade_s <= 0.0 {
+            target
+        } else {
+            let step = dt / fade_s;
+            crate::math::clamp(target, self.weight - step, self.weight + step)
+        };
+        self.started = true;
+    }
+}
+
+/// One layer's pose at `params` into `out`: a grid query, or for a clip
+/// table the pose at the playhead after advancing it by `dt`. Returns what
+/// the parameter query did, `None` if synthesis failed.
+fn layer_pose<const N: usize>(
+    table: &Table<'_>,
+    params: &[f32],
+    state: &mut LayerState,
+    dt: f32,
+    out: &mut Pose<N>,
+) -> Option<Adjust> {
+    let grid = table.grid().ok()?;
+    match table.kind() {
+        Kind::Grid => {
+            let mut query = Query::default();
+            grid.query_into(params, &mut query).ok()?;
+            query.pose(table, out).ok()?;
+            Some(query.adjust())
+        }
+        Kind::Clips { phases } => {
+            let clips = Clips::new(grid, table.param_grid().ok()?, usize::from(phases)).ok()?;
+            let motion = clips.motion(table, params).ok()?;
+            let phase = state.playhead.advance(&motion, dt);
+            clips.pose(&motion, table, phase, out).ok()?;
+            Some(motion.adjust())
+        }
+    }
+}
+
 /// What one frame's solve did ([`Pipeline::last_solve`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SolveStats {
@@ -299,6 +380,16 @@ pub struct Pipeline<'r, 'a, const N: usize = MAX_SEGMENTS> {
     rig: &'r Rig<'a, N>,
     table: Option<&'r Table<'a>>,
     grid: Option<Grid<'a>>,
+    /// The region's layers and their tables, if it has a layer list.
+    layered: Option<(&'r Layers<'a>, &'r [Option<Table<'a>>; MAX_LAYERS])>,
+    /// Each layer's playhead and effective weight.
+    layer_state: [LayerState; MAX_LAYERS],
+    /// Seconds performed since the loop last started ([`Source::Ramp`]).
+    layer_time: f32,
+    /// The rig's rest pose, joint-local: what the layers blend over.
+    rest_local: LocalPose<N>,
+    /// One layer's synthesized pose, joint-local.
+    layer_local: LocalPose<N>,
     resting: bool,
     /// Whether an armed frame has driven the outputs since boot.
     driven: bool,
@@ -369,10 +460,17 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             }
         }
         let angles = rig.rest_angles().ok()?;
+        let mut rest_local = LocalPose::default();
+        pose::to_local(&rig.body().hierarchy(), rig.rest_pose(), &mut rest_local).ok()?;
         Some(Self {
             rig,
             table: region.table.as_ref(),
             grid: region.table.as_ref().and_then(|t| t.grid().ok()),
+            layered: region.layers.as_ref().map(|l| (l, &region.layer_tables)),
+            layer_state: [LayerState::START; MAX_LAYERS],
+            layer_time: 0.0,
+            rest_local,
+            layer_local: LocalPose::default(),
             resting: true,
             driven: false,
             released: false,
@@ -435,10 +533,33 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         self.grid.is_some()
     }
 
+    /// Whether the pipeline performs layers (the region's layer list).
+    #[must_use]
+    pub fn has_layers(&self) -> bool {
+        self.layered.is_some()
+    }
+
+    /// Layer `i`'s effective weight (after its cross-fade) and phase (0
+    /// for a static grid) as of the last frame.
+    #[must_use]
+    pub fn layer(&self, i: usize) -> Option<(f32, f32)> {
+        let (layers, _) = self.layered?;
+        layers.as_slice().get(i)?;
+        let s = self.layer_state.get(i)?;
+        Some((s.weight, s.playhead.phase()))
+    }
+
     /// The servo targets by channel, quarter-µs (0: channel unused).
     #[must_use]
     pub fn targets(&self) -> &[u16] {
         self.targets.get(..self.channels).unwrap_or(&[])
+    }
+
+    /// The joint angles of the last performed frame (solved), before the
+    /// servos' calibration and slew limits.
+    #[must_use]
+    pub fn angles(&self) -> &Angles<N> {
+        &self.angles
     }
 
     /// The current world pose of the figure (solved, or rest).
@@ -601,6 +722,14 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
     /// synthesized pose.
     pub fn drop_correction(&mut self) {
         self.warm.clear();
+        self.restart_layers();
+    }
+
+    /// Starts the layers over (see [Layers](self#layers)): phase 0, the
+    /// ramps' time 0, weights at their sources' values without a fade.
+    fn restart_layers(&mut self) {
+        self.layer_state = [LayerState::START; MAX_LAYERS];
+        self.layer_time = 0.0;
     }
 
     /// Map, synthesize, solve and drive the servos for the frame last
@@ -615,7 +744,11 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         let t0 = cycles.now();
         self.map();
         let t1 = cycles.now();
-        let synthesized = self.synthesize();
+        let synthesized = if self.layered.is_some() {
+            self.synthesize_layers(dt)
+        } else {
+            self.synthesize()
+        };
         let t2 = cycles.now();
         let solved = synthesized && self.solve();
         let t3 = cycles.now();
@@ -711,6 +844,51 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         if pose::to_local(&body.hierarchy(), &self.synth, &mut self.local).is_err() {
             return false;
         }
+        self.angles.set_from_local(&body, &self.local).is_ok()
+    }
+
+    /// Synthesizes every layer, blends them over the rest pose (see
+    /// [`crate::layer`]) and sets the joint angles. False if a layer failed.
+    fn synthesize_layers(&mut self, dt: f32) -> bool {
+        let Some((layers, tables)) = self.layered else {
+            return false;
+        };
+        let time = self.layer_time;
+        self.layer_time += dt;
+        self.local = self.rest_local;
+        let mut adjusted = false;
+        for ((layer, table), i) in layers.as_slice().iter().zip(tables).zip(0..) {
+            let Some(table) = table else {
+                return false;
+            };
+            let mut params = [0.0f32; MAX_PARAMS];
+            for (p, s) in params.iter_mut().zip(layer.sources()) {
+                *p = s.value(&self.params, time);
+            }
+            let params = params.get(..usize::from(layer.axis_count)).unwrap_or(&[]);
+            let target = layer.weight.value(&self.params, time);
+            let Some(state) = self.layer_state.get_mut(i) else {
+                return false;
+            };
+            state.fade_to(target, layer.fade_s, dt);
+            let Some(adjust) = layer_pose(table, params, state, dt, &mut self.synth) else {
+                return false;
+            };
+            adjusted |= adjust != Adjust::None;
+            let body = self.rig.body();
+            if pose::to_local(&body.hierarchy(), &self.synth, &mut self.layer_local).is_err() {
+                return false;
+            }
+            if layer.root == Root::Apply {
+                self.layer_local.root_position += state.playhead.travelled();
+            }
+            layer::blend(&mut self.local, &self.layer_local, layer.mask, state.weight);
+        }
+        self.adjusted_now = adjusted;
+        if adjusted {
+            self.adjusted = self.adjusted.saturating_add(1);
+        }
+        let body = self.rig.body();
         self.angles.set_from_local(&body, &self.local).is_ok()
     }
 

@@ -57,6 +57,7 @@ pub mod deadline;
 pub mod frame;
 pub mod goal;
 pub mod grid;
+pub mod layer;
 pub mod math;
 pub mod output;
 pub mod perform;

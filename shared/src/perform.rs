@@ -298,7 +298,9 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     pub fn new(region: &'r Region<'a, N>, solver: &'r mut SolverState<N>) -> Self {
         let pipeline = Pipeline::new(region, solver);
         let reason = match (region.reason, &pipeline) {
-            (StatusReason::Ok, Some(p)) if !p.has_grid() => StatusReason::Unsupported,
+            (StatusReason::Ok, Some(p)) if !p.has_grid() && !p.has_layers() => {
+                StatusReason::Unsupported
+            }
             (StatusReason::Ok, None) => StatusReason::NoRig,
             (r, _) => r,
         };

@@ -29,10 +29,10 @@
 //! and after the last one up to a multiple of 4.
 //!
 //! Entry kinds ([`EntryKind`]): 1 the rig blob ([`crate::rig`]; exactly one),
-//! 2 a table blob ([`crate::table`]; the first one is table 0), 4 a show
-//! ([`crate::show`]; the first one is played; added within version 1, as
-//! the rule below allows: a reader that predates it skips it; kind 3 is
-//! taken by the layers of #18 on main). A reader
+//! 2 a table blob ([`crate::table`]; the first one is table 0), 3 a layer
+//! list ([`crate::layer`]; at most one, see [Layers](self#layers)), 4 a
+//! show ([`crate::show`]; the first one is played; added within version 1,
+//! as the rule below allows: a reader that predates it skips it). A reader
 //! skips entries of kinds it does not know, so later formats can add entries
 //! (more tables, a show) that an older firmware ignores; a change that an
 //! older reader would misread bumps [`VERSION`], and a reader refuses a
@@ -58,6 +58,20 @@
 //! next 4-byte boundary, then the table blob. A region that starts with the
 //! rig blob's magic (`"MRIG"`) is still read that way.
 //!
+//! # Layers
+//!
+//! A region with a layer list (kind 3) is performed by its layers instead
+//! of table 0: layer `i` names the `n`-th table entry (`n` from 0, in
+//! directory order; several layers may share one), and the board synthesizes
+//! every layer each frame and blends them ([`crate::layer`]). The reader
+//! checks the list (magic, version, CRC, fields, the rig's segment count)
+//! and then every layer's table: present and valid (the table reasons
+//! below), built for the rig (`RigMismatch`), and a static grid or a clip
+//! table of the clip layout with as many parameter axes as the layer has
+//! sources (`Unsupported`). The first failing layer refuses the whole region
+//! at arming with its reason, and [`Region::refused_layer`] names it. An
+//! older reader skips the list and performs table 0.
+//!
 //! # Why a board cannot arm
 //!
 //! [`Region::reason`] is the [`StatusReason`] the board reports: `NoRig` for
@@ -70,7 +84,9 @@
 
 use core::fmt;
 
+use crate::clip::Clips;
 use crate::crc::{Crc32, crc32};
+use crate::layer::{Layer, Layers, MAX_LAYERS};
 use crate::pose::MAX_SEGMENTS;
 use crate::rig::{self, MAX_PARAMS, Rig, RigError};
 use crate::show::{self, Show, ShowError};
@@ -104,8 +120,13 @@ impl EntryKind {
     pub const RIG: Self = Self(1);
     /// A table blob ([`crate::table`]).
     pub const TABLE: Self = Self(2);
+    /// A layer list ([`crate::layer`]; at most one).
+    pub const LAYERS: Self = Self(3);
     /// A show ([`crate::show`]; the first one is played).
     pub const SHOW: Self = Self(4);
+    /// A whole region nested as one entry, which the live loop ignores: the
+    /// instruction-count bench carries its layered variant so.
+    pub const NESTED: Self = Self(0x100);
 }
 
 /// One blob of a region.
@@ -141,6 +162,15 @@ impl<'a> Entry<'a> {
     pub const fn show(bytes: &'a [u8]) -> Self {
         Self {
             kind: EntryKind::SHOW,
+            bytes,
+        }
+    }
+
+    /// The layer list blob `bytes`.
+    #[must_use]
+    pub const fn layers(bytes: &'a [u8]) -> Self {
+        Self {
+            kind: EntryKind::LAYERS,
             bytes,
         }
     }
@@ -402,15 +432,25 @@ pub fn layout(bytes: &[u8]) -> Layout {
     }
 }
 
-/// The validated contents of the table region: the rig and table 0. The rig
-/// has capacity `N` (see [Capacity](crate::frame#capacity)). The other
-/// entries of a region are in its [`directory`].
+/// The validated contents of the table region: the rig and table 0, or the
+/// rig and its layers. The rig has capacity `N` (see
+/// [Capacity](crate::frame#capacity)). The other entries of a region are in
+/// its [`directory`].
 #[derive(Clone, Debug)]
 pub struct Region<'a, const N: usize = MAX_SEGMENTS> {
     /// The rig, if its blob is valid (and fits the capacity).
     pub rig: Option<Rig<'a, N>>,
-    /// Table 0, if its blob is valid and matches the rig.
+    /// Table 0, if its blob is valid and matches the rig (a region without
+    /// a layer list).
     pub table: Option<Table<'a>>,
+    /// The layer list (entry kind 3), if the region has one and every
+    /// layer passed its checks ([Layers](self#layers)).
+    pub layers: Option<Layers<'a>>,
+    /// Layer `i`'s table, for each layer of [`Region::layers`].
+    pub layer_tables: [Option<Table<'a>>; MAX_LAYERS],
+    /// The first layer refused, when the layer list was refused because of
+    /// one layer (its table missing, damaged or unfit): `reason` says why.
+    pub refused_layer: Option<u8>,
     /// Why the board cannot arm ([`StatusReason::Ok`] if it can).
     pub reason: StatusReason,
     /// The first show, if it is valid and built for the rig.
@@ -445,6 +485,9 @@ impl<'a, const N: usize> Region<'a, N> {
     pub const EMPTY: Self = Self {
         rig: None,
         table: None,
+        layers: None,
+        layer_tables: [None; MAX_LAYERS],
+        refused_layer: None,
         reason: StatusReason::NoRig,
         show: None,
         show_error: None,
@@ -458,6 +501,9 @@ impl<'a, const N: usize> Region<'a, N> {
     pub fn parse_into(&mut self, bytes: &'a [u8]) {
         self.rig = None;
         self.table = None;
+        self.layers = None;
+        self.layer_tables = [None; MAX_LAYERS];
+        self.refused_layer = None;
         self.reason = StatusReason::NoRig;
         self.show = None;
         self.show_error = None;
@@ -478,8 +524,6 @@ impl<'a, const N: usize> Region<'a, N> {
         if !self.parse_rig(rig.bytes) {
             return;
         }
-        let table = dir.find(EntryKind::TABLE, 0).map_or(&[][..], |e| e.bytes);
-        self.parse_table(table);
         if let (Some(entry), Some(rig)) = (dir.find(EntryKind::SHOW, 0), &self.rig) {
             let parsed = Show::parse(entry.bytes)
                 .and_then(|s| show::check_rig(&s, rig.rig_hash()).map(|()| s));
@@ -488,6 +532,12 @@ impl<'a, const N: usize> Region<'a, N> {
                 Err(e) => (None, Some(e)),
             };
         }
+        if let Some(list) = dir.find(EntryKind::LAYERS, 0) {
+            self.parse_layers(dir, list.bytes);
+            return;
+        }
+        let table = dir.find(EntryKind::TABLE, 0).map_or(&[][..], |e| e.bytes);
+        self.parse_table(table);
     }
 
     /// The older layout: rig blob, padding, table blob.
@@ -534,6 +584,79 @@ impl<'a, const N: usize> Region<'a, N> {
                 Err(e) => (None, table_reason(e)),
             }
         };
+    }
+}
+
+impl<'a, const N: usize> Region<'a, N> {
+    /// The layer list and each layer's table (see [Layers](self#layers)).
+    fn parse_layers(&mut self, dir: &Directory<'a>, bytes: &'a [u8]) {
+        let Some(rig) = &self.rig else {
+            return;
+        };
+        let layers = match Layers::parse(bytes) {
+            Ok(l) if l.segments() == rig.body().len() => l,
+            Ok(_) => {
+                self.reason = StatusReason::RigMismatch;
+                return;
+            }
+            Err(e) => {
+                self.reason = e.reason();
+                return;
+            }
+        };
+        for (i, (layer, slot)) in layers
+            .as_slice()
+            .iter()
+            .zip(self.layer_tables.iter_mut())
+            .enumerate()
+        {
+            let bytes = dir
+                .find(EntryKind::TABLE, usize::from(layer.table))
+                .map_or(&[][..], |e| e.bytes);
+            let why = match Table::parse(bytes) {
+                Ok(t) => match check_layer_table(rig, &t, layer) {
+                    StatusReason::Ok => {
+                        *slot = Some(t);
+                        continue;
+                    }
+                    why => why,
+                },
+                Err(_) if bytes.len() < 4 || erased(bytes) => StatusReason::NoTable,
+                Err(e) => table_reason(e),
+            };
+            self.reason = why;
+            self.refused_layer = Some(i as u8);
+            self.layer_tables = [None; MAX_LAYERS];
+            return;
+        }
+        self.layers = Some(layers);
+        self.reason = StatusReason::Ok;
+    }
+}
+
+/// Whether a valid table can drive one layer of this rig: built for the
+/// rig, a grid or a clip table of the clip layout, with one source per
+/// parameter axis.
+fn check_layer_table<const N: usize>(
+    rig: &Rig<'_, N>,
+    table: &Table<'_>,
+    layer: &Layer<'_>,
+) -> StatusReason {
+    if table.rig_hash() != rig.rig_hash() || table.segment_count() != rig.body().len() {
+        return StatusReason::RigMismatch;
+    }
+    let fits = table.param_axes().len() == usize::from(layer.axis_count)
+        && match table.kind() {
+            Kind::Grid => table.grid().is_ok(),
+            Kind::Clips { phases } => match (table.grid(), table.param_grid()) {
+                (Ok(g), Ok(p)) => Clips::new(g, p, usize::from(phases)).is_ok(),
+                _ => false,
+            },
+        };
+    if fits {
+        StatusReason::Ok
+    } else {
+        StatusReason::Unsupported
     }
 }
 

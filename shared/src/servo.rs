@@ -78,6 +78,27 @@ impl Calibration {
         math::clamp(pulse, self.pulse_low(), self.pulse_high())
     }
 
+    /// The joint angle a pulse width stands for: the inverse of
+    /// [`Calibration::pulse_us`] inside the calibrated range (a pulse
+    /// outside it maps to the nearer end). A degenerate pulse range, or a
+    /// NaN pulse, gives the middle of the angle range. Used to show the
+    /// figure as its servos place it (the board reports servo targets).
+    #[must_use]
+    pub fn angle_of(&self, pulse_us: f32) -> f32 {
+        let span = self.pulse_max_us - self.pulse_min_us;
+        let mut u = if span == 0.0 {
+            0.5
+        } else {
+            (pulse_us - self.trim_us - self.pulse_min_us) / span
+        };
+        if u.is_nan() {
+            u = 0.5;
+        }
+        let u = math::clamp(u, 0.0, 1.0);
+        let u = if self.reversed { 1.0 - u } else { u };
+        self.angle_min + u * (self.angle_max - self.angle_min)
+    }
+
     /// The lowest pulse this channel may ever receive, µs.
     #[must_use]
     pub fn pulse_low(&self) -> f32 {
@@ -342,6 +363,34 @@ pub mod maestro {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn angle_of_inverts_the_pulse_by_hand_worked_cases() {
+        // ±90° over 1000–2000 µs: 1750 µs is three quarters of the way, +45°.
+        let c = Calibration::HOBBY_180;
+        let quarter = core::f32::consts::FRAC_PI_4;
+        assert!((c.angle_of(1750.0) - quarter).abs() < 1e-6);
+        assert!((c.angle_of(1500.0)).abs() < 1e-6);
+        // Beyond the range: the nearer end.
+        assert!((c.angle_of(2600.0) - core::f32::consts::FRAC_PI_2).abs() < 1e-6);
+        // Reversed with a +20 µs trim: 1270 µs is 1250 before the trim, a
+        // quarter of the way, so three quarters from the far end: +45°.
+        let r = Calibration {
+            reversed: true,
+            trim_us: 20.0,
+            ..Calibration::HOBBY_180
+        };
+        assert!((r.angle_of(1270.0) - quarter).abs() < 1e-5);
+        // Round trip where the trimmed pulse is not clamped (the trim moves
+        // the ends by 20 µs, 0.063 rad).
+        for k in -8..=8 {
+            let a = k as f32 * 0.18;
+            for cal in [c, r] {
+                assert!((cal.angle_of(cal.pulse_us(a)) - a).abs() < 1e-4, "{a}");
+            }
+        }
+        assert!(c.angle_of(f32::NAN).abs() < 1e-6);
+    }
 
     #[test]
     fn stopping_speed_is_the_largest_speed_that_stops_in_time() {

@@ -26,6 +26,7 @@ use marionette_core::math;
 use marionette_core::output::ServoOutput;
 use marionette_core::output::serial::{Serial, UartServos};
 use marionette_core::pose::{LocalPose, Pose};
+use marionette_core::region::{EntryKind, directory};
 use marionette_core::rig::{FeetechSeries, Output, ServoDesc};
 use marionette_core::solve::{self, Method, Solver, SolverState};
 use marionette_core::wire::{
@@ -416,7 +417,68 @@ fn uart_outputs(rig_servos: &[ServoDesc]) -> [(Names, UartServos<CmsdkUart>); 3]
 /// UART back-end, sending the frame's targets on UART1 (`emit.*`) and the
 /// frame with it (`total.*`).
 fn frame_rows(counter: &mut Counter) {
-    let region = Region::<{ app::SEGMENTS }>::parse_sized(region::tables());
+    frame_rows_of(counter, region::tables(), &ROWS_ONE_TABLE);
+}
+
+/// The live loop's rows of one region.
+struct FrameRows {
+    /// Per stage, in the order of [`stage`].
+    stages: [(usize, &'static str); 6],
+    receive: &'static str,
+    worst: &'static str,
+    cold: &'static str,
+    /// Whether to time the UART back-ends too.
+    emit: bool,
+}
+
+/// The rows of the table region's rig with one table.
+const ROWS_ONE_TABLE: FrameRows = FrameRows {
+    stages: [
+        (stage::DECODE, "frame.humanoid16.decode"),
+        (stage::MAP, "frame.humanoid16.map"),
+        (stage::SYNTH, "frame.humanoid16.synth"),
+        (stage::SOLVE, "frame.humanoid16.solve"),
+        (stage::SERVO, "frame.humanoid16.servo"),
+        (stage::TOTAL, "frame.humanoid16.total"),
+    ],
+    receive: "frame.humanoid16.receive",
+    worst: "frame.humanoid16.worst",
+    cold: "frame.humanoid16.cold",
+    emit: true,
+};
+
+/// The rows of the same rig with two layers (the region nested in the
+/// table region: a walk clip table on the legs, the grid on the arms).
+const ROWS_TWO_LAYERS: FrameRows = FrameRows {
+    stages: [
+        (stage::DECODE, "frame.humanoid16.layers2.decode"),
+        (stage::MAP, "frame.humanoid16.layers2.map"),
+        (stage::SYNTH, "frame.humanoid16.layers2.synth"),
+        (stage::SOLVE, "frame.humanoid16.layers2.solve"),
+        (stage::SERVO, "frame.humanoid16.layers2.servo"),
+        (stage::TOTAL, "frame.humanoid16.layers2.total"),
+    ],
+    receive: "frame.humanoid16.layers2.receive",
+    worst: "frame.humanoid16.layers2.worst",
+    cold: "frame.humanoid16.layers2.cold",
+    emit: false,
+};
+
+/// [`frame_rows`] with two layers, if the table region nests a layered
+/// region ([`EntryKind::NESTED`]).
+fn layer_rows(counter: &mut Counter) {
+    let nested = directory(region::tables())
+        .ok()
+        .and_then(|d| d.find(EntryKind::NESTED, 0));
+    match nested {
+        Some(e) => frame_rows_of(counter, e.bytes, &ROWS_TWO_LAYERS),
+        None => Line::new().str("frame: no layered region").print(),
+    }
+}
+
+/// The frame rows of the region `bytes`, named by `rows`.
+fn frame_rows_of(counter: &mut Counter, bytes: &[u8], rows: &FrameRows) {
+    let region = Region::<{ app::SEGMENTS }>::parse_sized(bytes);
     let mut solver = SolverState::new();
     let mut performer = BoardPerformer::new(&region, &mut solver);
     if performer.pipeline().is_none() {
@@ -424,7 +486,9 @@ fn frame_rows(counter: &mut Counter) {
         return;
     }
     let servos = region.rig.as_ref().map_or(&[][..], |r| r.servos());
-    let mut outputs = uart_outputs(servos);
+    let mut all_outputs = uart_outputs(servos);
+    let used = if rows.emit { all_outputs.len() } else { 0 };
+    let outputs = all_outputs.get_mut(..used).unwrap_or(&mut []);
     feed(
         &mut performer,
         &Message::Command(Command {
@@ -439,7 +503,7 @@ fn frame_rows(counter: &mut Counter) {
     feed(&mut performer, &tracker_frame(0), 0);
     let cold = performer.stages().get(stage::TOTAL).copied().unwrap_or(0) & 0x00FF_FFFF;
     // The first write switches the bus servos' torque on: not a steady frame.
-    for (_, out) in &mut outputs {
+    for (_, out) in outputs.iter_mut() {
         let _ = out.write(performer.targets());
     }
     let mut sums = [0u32; 6];
@@ -454,30 +518,22 @@ fn frame_rows(counter: &mut Counter) {
         }
         worst = worst.max(performer.stages().get(stage::TOTAL).copied().unwrap_or(0));
         let targets = performer.targets();
-        for (sum, (_, out)) in emits.iter_mut().zip(&mut outputs) {
+        for (sum, (_, out)) in emits.iter_mut().zip(outputs.iter_mut()) {
             *sum = sum.saturating_add(counter.ticks(|| out.write(black_box(targets)).is_ok()));
         }
     }
     let n = (FRAMES - 1) as usize;
-    let names = [
-        (stage::DECODE, "frame.humanoid16.decode"),
-        (stage::MAP, "frame.humanoid16.map"),
-        (stage::SYNTH, "frame.humanoid16.synth"),
-        (stage::SOLVE, "frame.humanoid16.solve"),
-        (stage::SERVO, "frame.humanoid16.servo"),
-        (stage::TOTAL, "frame.humanoid16.total"),
-    ];
-    for (index, name) in names {
+    for (index, name) in rows.stages {
         report(name, "-", n, sums.get(index).copied().unwrap_or(0));
     }
-    report("frame.humanoid16.receive", "-", n, outer);
+    report(rows.receive, "-", n, outer);
     let total = sums.get(stage::TOTAL).copied().unwrap_or(0);
     for (((emit_name, total_name), _), emit) in outputs.iter().zip(emits) {
         report(emit_name, "-", n, emit);
         report(total_name, "-", n, total.saturating_add(emit));
     }
-    report("frame.humanoid16.worst", "-", 1, worst);
-    report("frame.humanoid16.cold", "-", 1, cold);
+    report(rows.worst, "-", 1, worst);
+    report(rows.cold, "-", 1, cold);
     Line::new()
         .str("frame armed ")
         .u32(u32::from(performer.armed()))
@@ -496,6 +552,7 @@ fn main() -> ! {
     synth_rows(&mut counter);
     solve_rows(&mut counter);
     frame_rows(&mut counter);
+    layer_rows(&mut counter);
     Line::new()
         .str("stack ")
         .u32(stack::high_water() as u32)

@@ -43,7 +43,7 @@ use super::error::{BuildError, InputError};
 use super::resample::{Record, Value};
 use super::retarget::{CAP, Rig};
 use super::spec::{AxisSpec, ClipSpec, FrameKind, Measure, MocapSpec, MotionSpec, Spec};
-use crate::import::{self, EndSites, Motion};
+use crate::import::{self, EndSites, ImportError, Motion};
 
 /// One imported, retargeted clip in the mocap's world frame.
 #[derive(Debug, Clone)]
@@ -74,20 +74,25 @@ pub fn load(spec: &Spec, m: &MocapSpec, tick: &dyn Fn(&str)) -> Result<Mocap, Bu
     let mut clips = Vec::with_capacity(m.clips.len());
     for (i, c) in m.clips.iter().enumerate() {
         tick(&c.name);
+        let at_clip = |e: ImportError| clip_error(spec, c, i, &e);
         let motion = import_clip(spec, m, c, i)?;
-        let sk = motion.core_skeleton(if m.end_sites {
-            EndSites::Keep
-        } else {
-            EndSites::Drop
-        })?;
+        let sk = motion
+            .core_skeleton(if m.end_sites {
+                EndSites::Keep
+            } else {
+                EndSites::Drop
+            })
+            .map_err(at_clip)?;
         if rig.is_none() {
             rig = Some(match &spec.rig.file {
                 Some(path) => {
-                    let file =
-                        crate::rigfile::load(path).map_err(|e| BuildError::Data(e.to_string()))?;
+                    let file = crate::rigfile::load(path).map_err(|e| {
+                        spec.source
+                            .error_line(spec.rig.line, "rig.file", e.to_string())
+                    })?;
                     Rig::from_rigfile(file, &sk, &spec.source, &spec.rig)?
                 }
-                None => Rig::from_skeleton(&sk, &spec.rig, &spec.source)?,
+                None => Rig::from_skeleton(&sk, &spec.rig, &spec.source, c.line)?,
             });
             first_names.clone_from(&sk.names);
         } else if sk.names != first_names {
@@ -100,7 +105,18 @@ pub fn load(spec: &Spec, m: &MocapSpec, tick: &dyn Fn(&str)) -> Result<Mocap, Bu
         }
         let Some(rig) = rig.as_ref() else { continue };
         let frame_time = c.fps.or(m.fps).map_or(motion.frame_time, |f| 1.0 / f);
-        let poses = retarget_all(&motion, &sk, rig)?;
+        let poses = retarget_all(&motion, &sk, rig).map_err(|e| match e {
+            BuildError::Import(e) => at_clip(e),
+            BuildError::Pose { file, problem } => spec
+                .source
+                .error_line(
+                    c.line,
+                    &format!("clip[{i}].file"),
+                    format!("{file}: {problem}"),
+                )
+                .into(),
+            other => other,
+        })?;
         clips.push(Clip {
             name: c.name.clone(),
             frame_time,
@@ -200,14 +216,34 @@ fn import_clip(spec: &Spec, m: &MocapSpec, c: &ClipSpec, i: usize) -> Result<Mot
                 .fps
                 .or(m.fps)
                 .map_or(import::amc::HDM05_FRAME_TIME, |f| 1.0 / f);
-            Ok(import::amc::read_motion(asf, &c.file, frame_time)?)
+            let skeleton = import::amc::read_asf(asf, None).map_err(|e| {
+                spec.source
+                    .error_line(m.skeleton_line, "mocap.skeleton", e.to_string())
+            })?;
+            let file = c.file.display().to_string();
+            let amc = import::open(&c.file)
+                .and_then(|r| import::amc::parse_amc(r, &file, &skeleton))
+                .map_err(|e| clip_error(spec, c, i, &e))?;
+            skeleton
+                .to_motion(&amc, frame_time)
+                .map_err(|e| clip_error(spec, c, i, &e))
         }
-        Some("bvh") => Ok(import::bvh::read_motion(&c.file, m.scale)?),
+        Some("bvh") => {
+            import::bvh::read_motion(&c.file, m.scale).map_err(|e| clip_error(spec, c, i, &e))
+        }
         _ => {
             let problem = format!("{}: expected a .bvh or .amc file", c.file.display());
             Err(spec.source.error_line(c.line, &field, problem).into())
         }
     }
+}
+
+/// A mocap file's error, located at the spec's `[[clip]] file` that names
+/// it (the mocap file's own line is in the message).
+fn clip_error(spec: &Spec, c: &ClipSpec, i: usize, e: &ImportError) -> BuildError {
+    spec.source
+        .error_line(c.line, &format!("clip[{i}].file"), e.to_string())
+        .into()
 }
 
 fn pose_error(file: &str, e: impl std::fmt::Debug) -> BuildError {
@@ -418,18 +454,19 @@ fn grid_params(spec: &Spec, c: &ClipSpec, segs: &[Option<usize>], pose: &[Seg]) 
 /// within phase `k`), for measuring what time resampling loses.
 pub type Originals = Vec<(f64, Vec<Seg>)>;
 
-/// Motion-table examples: one time-resampled clip each, and each clip's
-/// normalized source frames.
-pub fn clip_records(
-    spec: &Spec,
-    m: &MocapSpec,
-    mocap: &Mocap,
-) -> Result<(Vec<Record>, Vec<Originals>), BuildError> {
+/// Motion-table examples, each clip's normalized source frames, and for a
+/// loop each clip's seam.
+pub type ClipRecords = (Vec<Record>, Vec<Originals>, Vec<Seam>);
+
+/// Motion-table examples: one time-resampled clip each, each clip's
+/// normalized source frames, and for a loop each clip's seam.
+pub fn clip_records(spec: &Spec, m: &MocapSpec, mocap: &Mocap) -> Result<ClipRecords, BuildError> {
     let segs = measure_segments(spec, &mocap.rig)?;
     let forward = DVec3::from_array(m.forward);
     let segments = mocap.rig.names.len();
     let mut out = Vec::new();
     let mut originals = Vec::new();
+    let mut seams = Vec::new();
     for (g, (c, clip)) in m.clips.iter().zip(&mocap.clips).enumerate() {
         let last = *c.cut.last().unwrap_or(&0);
         if last >= clip.poses.len() {
@@ -443,21 +480,33 @@ pub fn clip_records(
                 .error_line(c.line, &format!("clip[{g}].cut"), problem)
                 .into());
         }
-        let first = c.cut[0];
+        let mut cut = c.cut.clone();
+        if spec.motion.looping
+            && let [a, b] = cut[..]
+        {
+            let seam = best_cut(&clip.poses, [a, b], spec.motion.seam_search);
+            seams.push(Seam {
+                clip: clip.name.clone(),
+                window: spec.motion.seam_window,
+                ..seam
+            });
+            cut = seam.chosen.to_vec();
+        }
+        let last = *cut.last().unwrap_or(&0);
+        let first = cut[0];
         let Normalized {
             frames,
             horizontal,
             travel,
         } = normalized_clip(spec, &spec.motion, clip, first, last, forward);
-        let poses = time_resample(&spec.motion, &frames, &c.cut, clip.frame_time, segments)
+        let poses = time_resample(&spec.motion, &frames, &cut, clip.frame_time, segments)
             .map_err(|e| pose_error(&clip.name, e))?;
-        let durations: Vec<f64> = c
-            .cut
+        let durations: Vec<f64> = cut
             .windows(2)
             .map(|w| (w[1] - w[0]) as f64 * clip.frame_time)
             .collect();
         let total: f64 = durations.iter().sum();
-        let at = if c.cut.len() > 2 { c.cut[1] - first } else { 0 };
+        let at = if cut.len() > 2 { cut[1] - first } else { 0 };
         let params = spec
             .axes
             .iter()
@@ -484,9 +533,133 @@ pub fn clip_records(
             },
             group: g,
         });
-        originals.push(phases_of(&c.cut, frames));
+        originals.push(phases_of(&cut, frames));
     }
-    Ok((out, originals))
+    Ok((out, originals, seams))
+}
+
+/// Frames compared on each side of a candidate seam frame, so that the
+/// motion (velocities) matches as well as the pose.
+pub const SEAM_CONTEXT: usize = 2;
+
+/// A loop's seam: the cut given, the cut chosen, and how well each closes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Seam {
+    /// The clip.
+    pub clip: String,
+    /// The cut in the spec, `[first, last]`.
+    pub given: [usize; 2],
+    /// The cut used (the given one without `seam_search`).
+    pub chosen: [usize; 2],
+    /// The frames searched on each side of each given end.
+    pub search: usize,
+    /// The seam-blend window, table frames.
+    pub window: usize,
+    /// Mean per-joint position jump at the seam with the given cut: how
+    /// far the last frame's pose is from the first's, relative to the root
+    /// (the root's net travel is carried by the loop), metres.
+    pub jump_given: f64,
+    /// The same with the chosen cut, metres.
+    pub jump_chosen: f64,
+    /// The mean per-joint step between consecutive source frames within the
+    /// chosen cut, metres.
+    pub step: f64,
+}
+
+/// Segment `j`'s position relative to the root, in world axes.
+fn relative(pose: &[Seg], j: usize) -> DVec3 {
+    pose[j].0 - pose[0].0
+}
+
+/// The mean per-joint position jump of a loop cut at `a` and `b` (see
+/// [`Seam::jump_given`]).
+#[must_use]
+pub fn seam_jump(poses: &[Vec<Seg>], a: usize, b: usize) -> f64 {
+    let (pa, pb) = (&poses[a], &poses[b]);
+    let n = pa.len().max(1);
+    (1..pa.len())
+        .map(|j| (relative(pb, j) - relative(pa, j)).length())
+        .sum::<f64>()
+        / n as f64
+}
+
+/// The mean per-joint step between consecutive frames of `a..=b`, metres.
+#[must_use]
+pub fn mean_step(poses: &[Vec<Seg>], a: usize, b: usize) -> f64 {
+    let frames = poses.get(a..=b).unwrap_or(&[]);
+    let (mut sum, mut count) = (0.0, 0usize);
+    for w in frames.windows(2) {
+        for (p, q) in w[0].iter().zip(&w[1]) {
+            sum += (q.0 - p.0).length();
+            count += 1;
+        }
+    }
+    if count == 0 { 0.0 } else { sum / count as f64 }
+}
+
+/// How badly a loop cut at `a` and `b` closes: over the frames `a + k` and
+/// `b + k` for `k` in `−SEAM_CONTEXT..=SEAM_CONTEXT` (those inside the
+/// clip), the squared differences of every segment's position relative to
+/// the root, plus the squared difference of the root's path from `a` and
+/// from `b`; the mean over the `k` compared.
+fn seam_cost(poses: &[Vec<Seg>], a: usize, b: usize) -> f64 {
+    let c = SEAM_CONTEXT as isize;
+    let (mut sum, mut count) = (0.0, 0usize);
+    for k in -c..=c {
+        let (Some(ia), Some(ib)) = (a.checked_add_signed(k), b.checked_add_signed(k)) else {
+            continue;
+        };
+        let (Some(pa), Some(pb)) = (poses.get(ia), poses.get(ib)) else {
+            continue;
+        };
+        let limbs: f64 = (1..pa.len())
+            .map(|j| (relative(pb, j) - relative(pa, j)).length_squared())
+            .sum();
+        let path = (pb[0].0 - poses[b][0].0) - (pa[0].0 - poses[a][0].0);
+        sum += limbs + path.length_squared();
+        count += 1;
+    }
+    if count == 0 {
+        f64::INFINITY
+    } else {
+        sum / count as f64
+    }
+}
+
+/// The loop cut within `search` frames of `given` at each end (inside the
+/// clip, at least half the given cycle long) whose seam closes best
+/// ([`seam_cost`]); ties keep the cut nearer the given one. `search = 0`
+/// keeps the given cut.
+#[must_use]
+pub fn best_cut(poses: &[Vec<Seg>], given: [usize; 2], search: usize) -> Seam {
+    let [a, b] = given;
+    let last = poses.len().saturating_sub(1);
+    let min_len = (b - a).div_ceil(2).max(1);
+    let mut best = (seam_cost(poses, a, b), given);
+    for a2 in a.saturating_sub(search)..=(a + search).min(last) {
+        for b2 in b.saturating_sub(search)..=(b + search).min(last) {
+            if b2 < a2 + min_len {
+                continue;
+            }
+            let cost = seam_cost(poses, a2, b2);
+            let moved = a.abs_diff(a2) + b.abs_diff(b2);
+            let best_moved = a.abs_diff(best.1[0]) + b.abs_diff(best.1[1]);
+            if cost < best.0 || (cost == best.0 && moved < best_moved) {
+                best = (cost, [a2, b2]);
+            }
+        }
+    }
+    let chosen = best.1;
+    Seam {
+        clip: String::new(),
+        given,
+        chosen,
+        search,
+        window: 0,
+        jump_given: seam_jump(poses, a, b),
+        jump_chosen: seam_jump(poses, chosen[0], chosen[1]),
+        step: mean_step(poses, chosen[0], chosen[1]),
+    }
 }
 
 /// Each frame of `first..=last` with its phase.
@@ -615,6 +788,33 @@ fn time_resample(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A root walking along +Z and a hand swinging with a period of 50
+    /// frames: the best loop cut near `[10, 65]` is exactly one period long
+    /// (the hand back where it was), and its jump is zero.
+    #[test]
+    fn best_cut_finds_the_period() {
+        let period = 50.0;
+        let poses: Vec<Vec<Seg>> = (0..200)
+            .map(|f| {
+                let t = std::f64::consts::TAU * f as f64 / period;
+                let root = DVec3::new(0.0, 1.0, 0.02 * f as f64);
+                let hand = root + DVec3::new(0.3 * t.sin(), -0.5, 0.2 * t.cos());
+                vec![(root, DQuat::IDENTITY), (hand, DQuat::IDENTITY)]
+            })
+            .collect();
+        let seam = best_cut(&poses, [10, 65], 10);
+        assert_eq!(seam.chosen[1] - seam.chosen[0], 50, "{seam:?}");
+        assert!(
+            seam.jump_chosen < 1e-9 && seam.jump_given > 0.05,
+            "{seam:?}"
+        );
+        // By hand: the hand moves 2π·√(0.3²·cos² + 0.2²·sin²)/50 per frame; the
+        // root 0.02 m; their mean is near (0.02 + ~0.031) / 2.
+        assert!((seam.step - 0.0255).abs() < 0.003, "{seam:?}");
+        let kept = best_cut(&poses, [10, 65], 0);
+        assert_eq!(kept.chosen, [10, 65]);
+    }
 
     #[test]
     fn heading_and_root_frames() {

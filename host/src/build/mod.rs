@@ -188,6 +188,8 @@ pub struct Dataset {
     pub param_frame: mocap::Frame,
     /// Clip tables: each group's normalized source frames with their phases.
     pub originals: Vec<mocap::Originals>,
+    /// Looping clip tables: each clip's seam (the cut given and used).
+    pub seams: Vec<mocap::Seam>,
     /// Seconds spent importing.
     pub load_seconds: f64,
     /// Import warnings (a clip whose frame rate looks wrong), each naming
@@ -195,45 +197,7 @@ pub struct Dataset {
     pub warnings: Vec<String>,
 }
 
-/// Progress reporting (an indicatif bar on a terminal, nothing otherwise).
-pub struct Progress {
-    bar: indicatif::ProgressBar,
-}
-
-impl Progress {
-    /// A bar on stderr, hidden unless `show` and stderr is a terminal.
-    #[must_use]
-    pub fn new(show: bool) -> Self {
-        let bar = if show {
-            indicatif::ProgressBar::new(0)
-        } else {
-            indicatif::ProgressBar::hidden()
-        };
-        if let Ok(style) =
-            indicatif::ProgressStyle::with_template("{msg:>28} [{bar:40}] {pos}/{len} {elapsed}")
-        {
-            bar.set_style(style.progress_chars("=> "));
-        }
-        Self { bar }
-    }
-
-    /// Starts a stage of `len` steps.
-    pub fn stage(&self, msg: &str, len: usize) {
-        self.bar.set_message(msg.to_owned());
-        self.bar.set_length(len as u64);
-        self.bar.set_position(0);
-    }
-
-    /// One step done.
-    pub fn tick(&self) {
-        self.bar.inc(1);
-    }
-
-    /// Clears the bar.
-    pub fn finish(&self) {
-        self.bar.finish_and_clear();
-    }
-}
+pub use crate::progress::Progress;
 
 /// Loads the examples of a spec.
 pub fn load(spec: &Spec, progress: &Progress) -> Result<Dataset, BuildError> {
@@ -322,6 +286,7 @@ fn from_examples(set: &examples::ExampleSet) -> Dataset {
         probe_axes: None,
         param_frame: mocap::Frame::WORLD,
         originals: Vec::new(),
+        seams: Vec::new(),
         load_seconds: 0.0,
         warnings: Vec::new(),
     }
@@ -353,8 +318,12 @@ fn from_mocap(
             .error_line(m.clips[0].line, "clip[0].cut", problem)
             .into());
     }
-    let (records, originals) = match layout {
-        Layout::Grid => (mocap::grid_records(spec, m, &mocap)?, Vec::new()),
+    let (records, originals, seams) = match layout {
+        Layout::Grid => (
+            mocap::grid_records(spec, m, &mocap)?,
+            Vec::new(),
+            Vec::new(),
+        ),
         Layout::Clips { .. } => mocap::clip_records(spec, m, &mocap)?,
     };
     let axes = spec
@@ -424,6 +393,7 @@ fn from_mocap(
         probe_axes,
         param_frame,
         originals,
+        seams,
         load_seconds: 0.0,
     })
 }
@@ -575,6 +545,15 @@ pub fn build(
     let post = post(data, &spec.resample, &placed);
     let grid = resample::grid(&space, &records, method, radius, &post, &|| progress.tick());
     let t2 = Instant::now();
+    if !grid.valid.iter().any(|v| *v) {
+        let (line, field) = match (spec.resample.line, spec.axes.first()) {
+            (0, Some(a)) => (a.line, "axis[0]"),
+            (l, _) => (l, "resample.valid_radius"),
+        };
+        let problem =
+            "every grid cell is outside the data: widen `valid_radius` or move the axes' ranges";
+        return Err(spec.source.error_line(line, field, problem).into());
+    }
     let table = table_spec(data, &grid)?;
     let blob = blob::write(&table)?;
     let quant = measure::quantization(&table, &blob)?;
@@ -613,12 +592,6 @@ pub fn build(
 
 /// The writer's table from resampled values.
 fn table_spec(data: &Dataset, grid: &resample::Resampled) -> Result<TableSpec, BuildError> {
-    if !grid.valid.iter().any(|v| *v) {
-        return Err(BuildError::Data(
-            "every grid cell is outside the data: widen `valid_radius` or move the axes' ranges"
-                .to_owned(),
-        ));
-    }
     let n = data.segments.len();
     let f32_pose = |s: &[Seg]| -> Vec<(Vec3, Quat)> {
         s.iter().map(|(p, q)| (p.as_vec3(), q.as_quat())).collect()

@@ -82,11 +82,13 @@ pub struct Rig {
 
 impl Rig {
     /// The mocap skeleton as a rig, scaled by `spec`; `src` locates errors
-    /// in the spec.
+    /// in the spec, at `clip_line` (the first clip's `file`) when the spec
+    /// has no `[rig]` table to point at.
     pub fn from_skeleton(
         sk: &CoreSkeleton,
         spec: &RigSpec,
         src: &Source,
+        clip_line: usize,
     ) -> Result<Self, InputError> {
         let map = &spec.names;
         // Kept joints (the root always), parents first as in the skeleton.
@@ -101,7 +103,7 @@ impl Rig {
             .iter()
             .map(|&i| map.segment_name(&sk.names[i]))
             .collect();
-        check_names(&names, map, src)?;
+        check_names(&names, &sk.names, &kept, map, (src, clip_line))?;
         for name in spec.lengths.keys() {
             if !names.contains(name) {
                 let field = format!("rig.lengths.{name}");
@@ -321,46 +323,97 @@ impl Rig {
 
 /// The segment names a table can hold: at most [`MAX_RIG_SEGMENTS`], each at
 /// most 24 bytes without NUL, no two alike. Errors name the `[rig]` field
-/// that shapes them.
-fn check_names(names: &[String], map: &NameMap, src: &Source) -> Result<(), InputError> {
+/// that shapes them, or the first clip's `file` (at `at.1`) when the spec
+/// has no `[rig]` table, and say which rule to add. `joints` are the
+/// skeleton's names, `kept` the joints `names` come from.
+fn check_names(
+    names: &[String],
+    joints: &[String],
+    kept: &[usize],
+    map: &NameMap,
+    at: (&Source, usize),
+) -> Result<(), InputError> {
+    let (src, clip_line) = at;
+    let no_rig = map.lines == [0; 4];
+    let place = |line: usize, field: &'static str| {
+        if no_rig {
+            (clip_line, "clip[0].file".to_owned(), " in a [rig] table")
+        } else {
+            (line, field.to_owned(), "")
+        }
+    };
     let [strip, rename, drop, _] = map.lines;
     if names.len() > MAX_RIG_SEGMENTS {
+        let (line, field, table) = place(drop, "rig.drop");
         return Err(src.error_line(
-            drop,
-            "rig.drop",
+            line,
+            &field,
             format!(
-                "the skeleton gives {} segments; a table holds at most {MAX_RIG_SEGMENTS}: drop joints (`drop = [\"*Twist*\", ...]` or `keep = [...]`)",
+                "the skeleton gives {} segments; a table holds at most {MAX_RIG_SEGMENTS}: drop joints{table} (`drop = [\"*Twist*\", ...]` or `keep = [...]`)",
                 names.len()
             ),
         ));
     }
-    if let Some(long) = names
+    if let Some(k) = names
         .iter()
-        .find(|n| n.len() > NAME_LEN || n.contains('\0'))
+        .position(|n| n.len() > NAME_LEN || n.contains('\0'))
     {
-        let (line, field) = if map.strip_prefix.is_none() {
-            (strip, "rig.strip_prefix")
+        let long = &names[k];
+        let joint = kept.get(k).and_then(|&j| joints.get(j)).unwrap_or(long);
+        let (line, field, table) = if map.strip_prefix.is_none() {
+            place(strip, "rig.strip_prefix")
         } else {
-            (rename, "rig.rename")
+            place(rename, "rig.rename")
+        };
+        let prefix = common_prefix(joints);
+        let strip_hint = if map.strip_prefix.is_none() && !prefix.is_empty() {
+            format!("`strip_prefix = {prefix:?}` (every joint starts with it), or ")
+        } else {
+            String::new()
         };
         return Err(src.error_line(
             line,
-            field,
+            &field,
             format!(
-                "segment name {long:?} is longer than {NAME_LEN} bytes: strip a prefix or rename it"
+                "joint {joint:?} gives segment name {long:?}, longer than {NAME_LEN} bytes: add{table} {strip_hint}`rename = {{ {} = \"short_name\" }}`, or drop it (`drop = [{:?}]`)",
+                map.stripped(joint),
+                map.stripped(joint)
             ),
         ));
     }
     for (k, n) in names.iter().enumerate() {
         if names[..k].contains(n) {
+            let (line, field, table) = place(rename, "rig.rename");
             return Err(src.error_line(
-                rename,
-                "rig.rename",
-                format!("two segments are named {n:?}"),
+                line,
+                &field,
+                format!("two segments are named {n:?}: rename one{table}"),
             ));
         }
     }
     Ok(())
+}
+
+/// The longest prefix of every name in `names` that ends in `_` (or is
+/// empty).
+fn common_prefix(names: &[String]) -> String {
+    let Some(first) = names.first() else {
+        return String::new();
+    };
+    let mut len = first.len();
+    for n in names {
+        len = first
+            .bytes()
+            .zip(n.bytes())
+            .take(len)
+            .take_while(|(a, b)| a == b)
+            .count();
+    }
+    let head = first.get(..len).unwrap_or("");
+    head.rfind('_')
+        .and_then(|i| head.get(..=i))
+        .unwrap_or("")
+        .to_owned()
 }
 
 /// Rest-pose alignment (`[rig] align_rest`): for each non-root rig segment
@@ -484,6 +537,7 @@ mod tests {
                 line: 3,
             },
             &src,
+            1,
         )
         .unwrap();
         // A mocap pose: root at (0, 2, 0) turned 90° about Y, elbow bent 90° about X.
@@ -516,7 +570,7 @@ mod tests {
             names: NameMap::default(),
             line: 3,
         };
-        let e = Rig::from_skeleton(&sk, &bad, &src).unwrap_err();
+        let e = Rig::from_skeleton(&sk, &bad, &src, 1).unwrap_err();
         assert_eq!((e.line, e.field.as_str()), (3, "rig.lengths.elbow"));
         // Dropping `upper` hangs `lower` from the root at the summed offset
         // (by hand: 0.3 + 0.25 m down), renamed; it still follows the
@@ -530,7 +584,7 @@ mod tests {
             },
             ..bad
         };
-        let rig = Rig::from_skeleton(&sk, &pruned, &src).unwrap();
+        let rig = Rig::from_skeleton(&sk, &pruned, &src, 1).unwrap();
         assert_eq!(rig.names, ["root", "forearm"]);
         assert_eq!(rig.parents, [NO_PARENT, 0]);
         assert!((rig.offsets[1] - Vec3::new(0.0, -0.55, 0.0)).length() < 1e-6);

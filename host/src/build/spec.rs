@@ -53,6 +53,9 @@
 //! frames = 32               # frames per phase
 //! looping = true            # one cyclic phase, seam-blended
 //! seam_window = 4           # frames blended at each end of a loop
+//! # seam_search = 12        # looping: move each end of a clip's cut up to this
+//!                           # many source frames, to the pair whose poses match
+//!                           # best (see `mocap::best_cut`); default 0: as given
 //!
 //! [resample]
 //! method = "auto"           # auto | idw | rbf | local-linear
@@ -149,6 +152,9 @@ pub enum Input {
 pub struct MocapSpec {
     /// ASF skeleton for AMC clips.
     pub skeleton: Option<PathBuf>,
+    /// Line of `[mocap] skeleton` (of `[mocap]` without one), for errors
+    /// found while reading it.
+    pub skeleton_line: usize,
     /// BVH metres per unit.
     pub scale: f64,
     /// Frame rate override.
@@ -334,6 +340,9 @@ pub fn glob(pattern: &str, name: &str) -> bool {
     rest.len() >= last.len() && rest.ends_with(last)
 }
 
+/// The farthest `[motion] seam_search` may move a cut end, source frames.
+pub const MAX_SEAM_SEARCH: usize = 240;
+
 /// Motion-table settings.
 #[derive(Debug, Clone, Copy)]
 pub struct MotionSpec {
@@ -343,6 +352,9 @@ pub struct MotionSpec {
     pub looping: bool,
     /// Seam-blend window, frames.
     pub seam_window: usize,
+    /// Looping: how far (source frames) each end of a clip's cut may move
+    /// to the pair of frames whose poses match best (0: as given).
+    pub seam_search: usize,
 }
 
 /// Resampling settings.
@@ -356,6 +368,9 @@ pub struct ResampleSpec {
     pub enforce_lengths: bool,
     /// Solve each resampled pose of a probe-position grid onto its grid point.
     pub place_probe: bool,
+    /// Line of `valid_radius` (of `[resample]` without one; 0 without
+    /// either), for errors found while building.
+    pub line: usize,
 }
 
 #[derive(Deserialize)]
@@ -377,7 +392,7 @@ struct Raw {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawMocap {
-    skeleton: Option<String>,
+    skeleton: Option<Spanned<String>>,
     scale: Option<Spanned<f64>>,
     fps: Option<Spanned<f64>>,
     every: Option<Spanned<usize>>,
@@ -435,6 +450,7 @@ struct RawMotion {
     frames: Option<Spanned<usize>>,
     looping: Option<bool>,
     seam_window: Option<Spanned<usize>>,
+    seam_search: Option<Spanned<usize>>,
 }
 
 #[derive(Deserialize)]
@@ -456,16 +472,53 @@ pub fn read(path: &Path) -> Result<Spec, InputError> {
 /// The field a TOML error at byte `at` is about: the key on that line, or
 /// the table header.
 fn field_at(src: &Source, at: usize) -> String {
-    let start = src.text[..at.min(src.text.len())]
-        .rfind('\n')
-        .map_or(0, |i| i + 1);
+    let text = &src.text[..at.min(src.text.len())];
+    let start = text.rfind('\n').map_or(0, |i| i + 1);
     let line = src.text[start..].lines().next().unwrap_or("").trim();
     let field = match line.strip_prefix('[') {
         Some(header) => header.trim_matches(|c| c == '[' || c == ']').trim(),
         None => line.split_once('=').map_or("", |(k, _)| k.trim()),
     };
     // A bare `[` or ` = 1` names no key: the spec as a whole.
-    if field.is_empty() { "spec" } else { field }.to_owned()
+    if field.is_empty() {
+        return "spec".to_owned();
+    }
+    if line.starts_with('[') {
+        return field.to_owned();
+    }
+    // A key: under the nearest table header above it (`mocap.scale`,
+    // `clip[1].file` for the second `[[clip]]`).
+    let headers: Vec<&str> = text
+        .get(..start)
+        .unwrap_or("")
+        .lines()
+        .map(str::trim)
+        .filter(|l| is_header(l))
+        .collect();
+    match headers.last() {
+        Some(h) if h.starts_with("[[") => {
+            let name = h.trim_matches(|c| c == '[' || c == ']').trim();
+            let index = headers.iter().filter(|o| *o == h).count() - 1;
+            format!("{name}[{index}].{field}")
+        }
+        Some(h) => format!(
+            "{}.{field}",
+            h.trim_matches(|c| c == '[' || c == ']').trim()
+        ),
+        None => field.to_owned(),
+    }
+}
+
+/// Whether `line` (trimmed) is a table header, `[name]` or `[[name]]`
+/// (not the continuation of a multi-line array).
+fn is_header(line: &str) -> bool {
+    let code = line.split('#').next().unwrap_or("").trim_end();
+    code.starts_with('[')
+        && code.ends_with(']')
+        && code
+            .trim_matches(|c| c == '[' || c == ']')
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | ' '))
 }
 
 /// Parses a spec from its text; `dir` resolves relative paths.
@@ -639,7 +692,11 @@ impl Parser<'_> {
             }
         }
         Ok(MocapSpec {
-            skeleton: r.skeleton.as_deref().map(|s| self.path(s)),
+            skeleton: r.skeleton.as_ref().map(|s| self.path(s.get_ref())),
+            skeleton_line: r
+                .skeleton
+                .as_ref()
+                .map_or_else(|| self.line(&m.span()), |s| self.line(&s.span())),
             scale,
             fps,
             every,
@@ -1035,6 +1092,7 @@ impl Parser<'_> {
                 frames: 0,
                 looping: false,
                 seam_window: 0,
+                seam_search: 0,
             });
         }
         let r = m.map(Spanned::get_ref);
@@ -1061,10 +1119,25 @@ impl Parser<'_> {
             Some(w) => *w.get_ref(),
             None => (frames / 8).max(1),
         };
+        let seam_search = match r.and_then(|r| r.seam_search.as_ref()) {
+            Some(w) if !looping => {
+                return self.err(w.span(), "motion.seam_search", "needs looping = true");
+            }
+            Some(w) if *w.get_ref() > MAX_SEAM_SEARCH => {
+                return self.err(
+                    w.span(),
+                    "motion.seam_search",
+                    format!("must be at most {MAX_SEAM_SEARCH} frames"),
+                );
+            }
+            Some(w) => *w.get_ref(),
+            None => 0,
+        };
         Ok(MotionSpec {
             frames,
             looping,
             seam_window,
+            seam_search,
         })
     }
 
@@ -1096,9 +1169,15 @@ impl Parser<'_> {
             }
             v => v.map(|v| *v.get_ref()),
         };
+        let line = match (g.and_then(|g| g.valid_radius.as_ref()), r) {
+            (Some(v), _) => self.line(&v.span()),
+            (None, Some(r)) => self.line(&r.span()),
+            (None, None) => 0,
+        };
         Ok(ResampleSpec {
             method,
             valid_radius,
+            line,
             enforce_lengths: g.and_then(|g| g.enforce_lengths).unwrap_or(true),
             place_probe: g.and_then(|g| g.place_probe).unwrap_or(true),
         })
@@ -1196,9 +1275,9 @@ count = 4
         let e = parse_text(&GOOD.replace("component = \"x\"", "component = \"w\"")).unwrap_err();
         assert_eq!((e.line, e.field.as_str()), (12, "axis[0].component"));
         let e = parse_text(&GOOD.replace("every = 2", "every = \"two\"")).unwrap_err();
-        assert_eq!((e.line, e.field.as_str()), (4, "every"));
+        assert_eq!((e.line, e.field.as_str()), (4, "mocap.every"));
         let e = parse_text(&GOOD.replace("every = 2", "evry = 2")).unwrap_err();
-        assert_eq!((e.line, e.field.as_str()), (4, "evry"));
+        assert_eq!((e.line, e.field.as_str()), (4, "mocap.evry"));
         assert!(e.problem.contains("evry"), "{e}");
         let e = parse_text(&GOOD.replace("kind = \"grid\"", "kind = \"table\"")).unwrap_err();
         assert_eq!((e.line, e.field.as_str()), (1, "kind"));

@@ -1,6 +1,11 @@
 //! `marionette build SPEC -o tables.bin`: build a table blob from mocap or a
 //! JSON example set (see [`crate::build`]), print what was measured, and
 //! optionally measure held-out error (`--holdout CLIP|all`).
+//!
+//! A looping clip table reports each clip's seam (a `seam` line; `seams` in
+//! `--json`: `clip`, `given` and `chosen` cut `[first, last]`, `search`,
+//! `window`, `jump_given_m`, `jump_chosen_m`, `step_m`; see
+//! [`crate::build::mocap::Seam`]).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -154,7 +159,12 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         let groups = holdout_groups(&data, which)?;
         let rows = groups
             .iter()
-            .map(|&g| measure::holdout(&spec, &data, g, &progress))
+            .enumerate()
+            .map(|(k, &g)| {
+                let name = &data.groups[g];
+                progress.set_prefix(&format!("hold-out {}/{} ({name}): ", k + 1, groups.len()));
+                measure::holdout(&spec, &data, g, &progress)
+            })
             .collect::<Result<Vec<_>, _>>()?;
         progress.finish();
         if args.json {
@@ -381,6 +391,20 @@ fn build_text(
             c.mean_rotation.to_degrees()
         );
     }
+    for seam in &data.seams {
+        let [a, b] = seam.given;
+        let [c, d] = seam.chosen;
+        let _ = writeln!(
+            s,
+            "  seam {}: cut {a}..{b} -> {c}..{d} (searched ±{} frames): joint jump at the seam {} -> {} (mean frame step {}); blended over {} frames at each end",
+            seam.clip,
+            seam.search,
+            mm(seam.jump_given),
+            mm(seam.jump_chosen),
+            mm(seam.step),
+            seam.window
+        );
+    }
     let [import, cv, grid, write] = r.seconds;
     let _ = writeln!(
         s,
@@ -419,6 +443,11 @@ fn build_json(b: &Built, data: &Dataset, out: &std::path::Path, total: f64) -> s
         "sample_bytes": marionette_core::table::SAMPLE_LEN,
         "quantization": r.quant,
         "reconstruction": r.reconstruction,
+        "seams": data.seams.iter().map(|m| json!({
+            "clip": m.clip, "given": m.given, "chosen": m.chosen, "search": m.search,
+            "window": m.window, "jump_given_m": m.jump_given, "jump_chosen_m": m.jump_chosen,
+            "step_m": m.step,
+        })).collect::<Vec<_>>(),
         "seconds": {
             "import": r.seconds[0], "cross_validation": r.seconds[1],
             "resampling": r.seconds[2], "writing": r.seconds[3], "total": total,

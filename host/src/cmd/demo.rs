@@ -16,6 +16,14 @@
 //! 3. **Draw**: the servo curves the board sent, and the figure (the native
 //!    core's solved pose, with its goals) at a few times, in four views.
 //!
+//! `--layers` performs two layers instead of the reach table alone
+//! ([`layered_region`]): the walk clip table (`--walk-spec`, default
+//! `data/builds/walk_humanoid16.toml`) plays on the legs, the left arm and
+//! the torso, its speed ramping from the table's slowest walk to its run over
+//! the take, while the reach grid drives the right arm (and half of the torso
+//! and head) from the tracked hand, and the solver puts the hand on it. The
+//! rest is the same: the emulated board against the native core, bit for bit.
+//!
 //! Written to `--out` (default `out/`): `SPEC_STEM.bin`, e.g. `reach_humanoid16.bin` (the table
 //! blob), `region.bin` (rig + table, as flashed), `servo_emulated.csv`
 //! (`time_us,ch0..ch15`, µs), `servo_emulated.png`, and `frame_<k>.png`.
@@ -68,6 +76,176 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+    /// The live view (`--view`, `--listen`).
+    #[command(flatten)]
+    pub view: super::view::ViewArgs,
+    /// Perform two layers ([`layered_region`]): the walk table of
+    /// `--walk-spec` on the legs (its speed ramping from the table's slowest
+    /// to its fastest over the take) while the right arm follows the tracked
+    /// hand with the reach table of `--spec` (plus the solve).
+    #[arg(long)]
+    pub layers: bool,
+    /// The walk (clip) table's build spec, for `--layers`.
+    #[arg(long, default_value = "data/builds/walk_humanoid16.toml")]
+    pub walk_spec: PathBuf,
+}
+
+/// Segments each layer of `demo --layers` owns, with their mask weight
+/// (255 = 1). Walk: the legs and the left arm's swing, the torso; the
+/// pelvis stays at rest (the puppet is on a stand, and the walk's travel is
+/// dropped). Reach: the right arm, and half of the torso and the head over
+/// the walk's.
+pub const DEMO_MASKS: [(&str, &[(&str, u8)]); 2] = [
+    (
+        "walk",
+        &[
+            ("torso", 255),
+            ("head", 255),
+            ("l_upper_arm", 255),
+            ("l_forearm", 255),
+            ("l_thigh", 255),
+            ("l_shin", 255),
+            ("l_foot", 255),
+            ("r_thigh", 255),
+            ("r_shin", 255),
+            ("r_foot", 255),
+        ],
+    ),
+    (
+        "reach",
+        &[
+            ("torso", 128),
+            ("head", 128),
+            ("r_upper_arm", 255),
+            ("r_forearm", 255),
+        ],
+    ),
+];
+
+/// The goals `demo --layers` switches off (by segment): the left hand's and
+/// the feet's, so that the legs and the left arm walk (in the air, on the
+/// stand) instead of being held on the left tracker and the floor; the
+/// right hand stays on its tracker.
+pub const DEMO_GOALS_OFF: [&str; 3] = ["l_forearm", "l_foot", "r_foot"];
+
+/// Sets the weight of the rig's goals on `segments` to 0 at the start of
+/// `session` (`Hello`, `Arm` numbered 0, the frames from 1, …):
+/// `SetGoalWeight` commands sent with the `Hello` (in the same write, so
+/// that the session still opens with `Hello` and `Arm`), numbered just below
+/// the `Arm`'s 0 (the sequence wraps from `u32::MAX` to 0).
+fn goals_off(
+    rig: &marionette_core::rig::RigDesc<'_>,
+    segments: &[&str],
+    session: &mut [perform::Sent],
+) -> Result<(), CmdError> {
+    use marionette_core::wire::{Command, CommandKind};
+    let names = rig.segments.as_slice();
+    let goals: Vec<u8> = rig
+        .goals
+        .as_slice()
+        .iter()
+        .enumerate()
+        .filter(|(_, g)| {
+            names
+                .get(usize::from(g.segment))
+                .is_some_and(|s| segments.contains(&s.name))
+        })
+        .map(|(i, _)| u8::try_from(i).unwrap_or(u8::MAX))
+        .collect();
+    let n = u32::try_from(goals.len()).unwrap_or(0);
+    let Some(hello) = session.first_mut() else {
+        return Err("demo --layers: the session is empty".into());
+    };
+    for (k, goal) in (0u32..).zip(goals) {
+        let cmd = Message::Command(Command {
+            seq: 0u32.wrapping_sub(n - k),
+            kind: CommandKind::SetGoalWeight { goal, weight: 0.0 },
+        });
+        hello.bytes.extend(perform::frame_bytes(&cmd)?);
+    }
+    Ok(())
+}
+
+/// A layer mask over `segments` from `(name, weight)` pairs (others 0).
+fn mask(segments: &[String], owned: &[(&str, u8)]) -> Result<Vec<u8>, CmdError> {
+    let mut m = vec![0u8; segments.len()];
+    for (name, w) in owned {
+        let i = segments
+            .iter()
+            .position(|s| s == name)
+            .ok_or_else(|| format!("demo --layers: the rig has no segment `{name}`"))?;
+        m[i] = *w;
+    }
+    Ok(m)
+}
+
+/// The region of `demo --layers`: the rig, table 0 the reach grid
+/// (`reach_blob`, parameters the rig's 0-2, the tracked right hand), table 1
+/// the walk clips (`walk_blob`), and the layer list: layer 0 the walk
+/// (speed ramping from the table's slowest to its fastest over
+/// `ramp_seconds`, root travel dropped, 0.25 s cross-fade), layer 1 the
+/// reach over it ([`DEMO_MASKS`]).
+pub fn layered_region(
+    rig: &rigfile::RigFile,
+    reach_blob: &[u8],
+    walk_blob: &[u8],
+    ramp_seconds: f32,
+) -> Result<Vec<u8>, CmdError> {
+    use marionette_core::layer::{Layer, Layers, Root, Source};
+    use marionette_core::region::{self, Entry};
+    let rig_blob = rigfile::to_blob(rig)?;
+    let walk = marionette_core::table::Table::parse(walk_blob)
+        .map_err(|e| format!("the walk table: {e}"))?;
+    let [speed] = walk.param_axes() else {
+        return Err("demo --layers: the walk table must have one parameter axis (speed)".into());
+    };
+    let fastest = speed.min + speed.step * f32::from(speed.count.saturating_sub(1));
+    let segments = rig.segment_names();
+    let masks = [
+        mask(segments, DEMO_MASKS[0].1)?,
+        mask(segments, DEMO_MASKS[1].1)?,
+    ];
+    let none = [Source::Const(0.0); marionette_core::table::MAX_AXES];
+    let mut walk_axes = none;
+    walk_axes[0] = Source::Ramp {
+        from: speed.min,
+        to: fastest,
+        seconds: ramp_seconds,
+    };
+    let mut reach_axes = none;
+    reach_axes[..3].copy_from_slice(&[Source::Param(0), Source::Param(1), Source::Param(2)]);
+    let layers = [
+        Layer {
+            table: 1,
+            root: Root::Drop,
+            fade_s: 0.25,
+            weight: Source::Const(1.0),
+            axes: walk_axes,
+            axis_count: 1,
+            mask: &masks[0],
+        },
+        Layer {
+            table: 0,
+            root: Root::Drop,
+            fade_s: 0.25,
+            weight: Source::Const(1.0),
+            axes: reach_axes,
+            axis_count: 3,
+            mask: &masks[1],
+        },
+    ];
+    let mut list = vec![0u8; marionette_core::layer::len(layers.len(), segments.len())];
+    Layers::write(&layers, segments.len(), &mut list).map_err(|e| e.to_string())?;
+    let entries = [
+        Entry::rig(&rig_blob),
+        Entry::table(reach_blob),
+        Entry::table(walk_blob),
+        Entry::layers(&list),
+    ];
+    let mut out = vec![0u8; region::len(&entries).map_err(|e| e.to_string())?];
+    let n = region::write(&entries, &mut out).map_err(|e| e.to_string())?;
+    out.truncate(n);
+    Ok(out)
 }
 
 /// A path as given if it exists, else the file of that repository path
@@ -88,12 +266,18 @@ pub fn repo_path(p: &Path) -> PathBuf {
 /// Builds the table of a spec (no progress bar), checking first that the
 /// emulated board's table region can hold it.
 pub fn build_table(spec_path: &Path) -> Result<Built, CmdError> {
+    build_table_with(spec_path, &Progress::new(false))
+}
+
+/// As [`build_table`], reporting its stages on `progress`.
+pub fn build_table_with(spec_path: &Path, progress: &Progress) -> Result<Built, CmdError> {
     let spec = spec::read(spec_path)?;
     crate::capacity::check_spec(&spec, Some(&board::EMULATED))?;
-    let progress = Progress::new(false);
-    let data = build::load(&spec, &progress)?;
+    let data = build::load(&spec, progress)?;
     crate::capacity::check_dataset(&spec, &data, Some(&board::EMULATED))?;
-    Ok(build::build(&spec, &data, None, &progress)?)
+    let built = build::build(&spec, &data, None, progress)?;
+    progress.finish();
+    Ok(built)
 }
 
 /// The region image and session of a rig file, a table blob and a recording.
@@ -181,9 +365,105 @@ pub struct ServoRange {
     pub limits_us: [f64; 2],
 }
 
+/// What `demo --layers` performed.
+#[derive(Debug, Serialize)]
+pub struct LayersSummary {
+    /// The walk table's build spec.
+    pub walk_spec: String,
+    /// Walk table blob bytes (written as `SPEC_STEM.bin` beside the reach table).
+    pub walk_table_bytes: usize,
+    /// The walk speed ramp: from, to (the table's speed axis), over seconds.
+    pub speed_ramp: [f64; 3],
+    /// Each layer in blend order: name, table entry, and the segments it
+    /// owns with their mask weight (0..1).
+    pub layers: Vec<LayerInfo>,
+}
+
+/// One layer of `demo --layers`.
+#[derive(Debug, Serialize)]
+pub struct LayerInfo {
+    /// `walk` or `reach`.
+    pub name: String,
+    /// Index among the region's table entries.
+    pub table: u8,
+    /// `(segment, weight)` for the segments with a non-zero mask.
+    pub mask: Vec<(String, f64)>,
+}
+
+/// Turns the demo's `inputs` (of [`inputs`]) into those of `demo --layers`:
+/// the region becomes [`layered_region`] with the walk speed ramping over
+/// the take, and the session switches the goals of [`DEMO_GOALS_OFF`] off.
+/// Returns the ramp's length, seconds.
+pub fn make_layered(
+    inputs: &mut Inputs,
+    rig_path: &Path,
+    reach_blob: &[u8],
+    walk_blob: &[u8],
+) -> Result<f32, CmdError> {
+    let rig = rigfile::load(&rigfile::resolve(rig_path))?;
+    let span_us = match (inputs.times.first(), inputs.times.last()) {
+        (Some(a), Some(b)) => b.wrapping_sub(*a),
+        _ => 0,
+    };
+    let seconds = (span_us as f32 * 1e-6).max(0.1);
+    inputs.region = layered_region(&rig, reach_blob, walk_blob, seconds)?;
+    goals_off(&rig.desc(), &DEMO_GOALS_OFF, &mut inputs.session)?;
+    Ok(seconds)
+}
+
+/// Builds the walk table and replaces the region of `inputs` by the
+/// layered one ([`layered_region`]), the speed ramping over the take.
+fn use_layers(
+    args: &Args,
+    rig_path: &Path,
+    reach_blob: &[u8],
+    inputs: &mut Inputs,
+) -> Result<LayersSummary, CmdError> {
+    let walk_spec = repo_path(&args.walk_spec);
+    let walk = build_table(&walk_spec)?;
+    let stem = walk_spec
+        .file_stem()
+        .map_or_else(|| "walk".to_string(), |s| s.to_string_lossy().into_owned());
+    crate::save::save(
+        &args.out.join(format!("{stem}.bin")),
+        &walk.blob,
+        &[("the spec", walk_spec.as_path())],
+    )?;
+    let seconds = make_layered(inputs, rig_path, reach_blob, &walk.blob)?;
+    let table = marionette_core::table::Table::parse(&walk.blob)
+        .map_err(|e| format!("the walk table: {e}"))?;
+    let speed = table
+        .param_axes()
+        .first()
+        .copied()
+        .ok_or("the walk table has no speed axis")?;
+    let fastest = speed.min + speed.step * f32::from(speed.count.saturating_sub(1));
+    let layers = DEMO_MASKS
+        .iter()
+        .zip([1u8, 0])
+        .map(|((name, owned), table)| LayerInfo {
+            name: (*name).to_string(),
+            table,
+            mask: owned
+                .iter()
+                .map(|(s, w)| ((*s).to_string(), f64::from(*w) / 255.0))
+                .collect(),
+        })
+        .collect();
+    Ok(LayersSummary {
+        walk_spec: walk_spec.display().to_string(),
+        walk_table_bytes: walk.blob.len(),
+        speed_ramp: [f64::from(speed.min), f64::from(fastest), f64::from(seconds)],
+        layers,
+    })
+}
+
 /// What the demo measured.
 #[derive(Debug, Serialize)]
 pub struct Summary {
+    /// `--layers`: the layers performed (absent without it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub layers: Option<LayersSummary>,
     /// The build spec.
     pub spec: String,
     /// Examples the table was built from, and from how many clips.
@@ -233,8 +513,8 @@ pub struct Summary {
     pub board_seconds: f64,
 }
 
-/// Sum of all receive-error counters.
-fn error_total(e: &ErrorCounters) -> u32 {
+/// The sum of a board's receive-error counters.
+pub fn error_total(e: &ErrorCounters) -> u32 {
     [
         e.cobs, e.crc, e.decode, e.oversize, e.version, e.lost, e.stale, e.range,
     ]
@@ -294,8 +574,9 @@ fn servo_ranges(rig: &Rig<'_>, run: &Run) -> Vec<ServoRange> {
         .collect()
 }
 
-/// The goals of one tracker frame as marks on a solved pose.
-fn marks(rig: &Rig<'_>, frame: &TrackerFrame, pose: &Pose<MAX_SEGMENTS>) -> Vec<Mark> {
+/// The goals of one tracker frame as marks on a pose (the demo's pictures,
+/// the live view).
+pub fn marks(rig: &Rig<'_>, frame: &TrackerFrame, pose: &Pose<MAX_SEGMENTS>) -> Vec<Mark> {
     let mut params = [0.0f32; MAX_PARAMS];
     let mut goals = GoalSet::<MAX_GOALS>::new();
     let _ = rig.map_sensors(frame.sensors.as_slice(), &mut params, &mut goals);
@@ -400,7 +681,7 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     let start = Instant::now();
     let (spec_path, rig_path) = (repo_path(&args.spec), repo_path(&args.rig));
     let recording = repo_path(&args.recording);
-    let built = build_table(&spec_path)?;
+    let built = build_table_with(&spec_path, &Progress::new(true))?;
     let build_seconds = start.elapsed().as_secs_f64();
     // Named for the spec it was built from (`reach_humanoid16.toml` ->
     // `reach_humanoid16.bin`).
@@ -417,7 +698,12 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         &built.blob,
         &[("the spec", spec_path.as_path())],
     )?;
-    let inputs = inputs(&rig_path, &built.blob, &recording)?;
+    let mut inputs = inputs(&rig_path, &built.blob, &recording)?;
+    let layers = if args.layers {
+        Some(use_layers(args, &rig_path, &built.blob, &mut inputs)?)
+    } else {
+        None
+    };
     if let Some(stop) = refusal::precheck(BOARD, &inputs.region, &board::EMULATED) {
         if args.json {
             let doc = serde_json::json!({ "spec": spec_path.display().to_string(), "board": stop.report() });
@@ -435,7 +721,15 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         summary: emulated,
         stop,
         ..
-    } = super::emulate::compare(&inputs, &args.out, Pacing::AsFastAsPossible)?;
+    } = super::view::watched(
+        &args.view,
+        &inputs.region,
+        &format!("{}: {recording_name}", rig.name()),
+        &tracker_frames,
+        |watch| {
+            super::emulate::compare_watched(&inputs, &args.out, Pacing::AsFastAsPossible, watch)
+        },
+    )?;
     if let Some(stop) = stop {
         if args.json {
             println!("{}", serde_json::to_string_pretty(&emulated)?);
@@ -473,6 +767,7 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     }
     let (errors, hand_residual_mm) = telemetry(&board.replies);
     let summary = Summary {
+        layers,
         spec: spec_path.display().to_string(),
         examples: built.report.examples,
         clips: built.report.groups,
@@ -524,7 +819,30 @@ fn text(s: &Summary, period_us: u32) -> String {
         s.table_bytes,
         s.build_seconds
     );
-    let _ = writeln!(o, "rig + table: {} (the board arms)", s.arm);
+    if let Some(l) = &s.layers {
+        let _ = writeln!(
+            o,
+            "walk table: {} -> {} bytes; speed ramps {:.2} -> {:.2} over {:.2} s",
+            l.walk_spec, l.walk_table_bytes, l.speed_ramp[0], l.speed_ramp[1], l.speed_ramp[2]
+        );
+        for (k, layer) in l.layers.iter().enumerate() {
+            let owned: Vec<String> = layer
+                .mask
+                .iter()
+                .map(|(seg, w)| format!("{seg} {w:.2}"))
+                .collect();
+            let _ = writeln!(
+                o,
+                "layer {k}: {} (table {}) on {}",
+                layer.name,
+                layer.table,
+                owned.join(", ")
+            );
+        }
+        let _ = writeln!(o, "rig + layers: {} (the board arms)", s.arm);
+    } else {
+        let _ = writeln!(o, "rig + table: {} (the board arms)", s.arm);
+    }
     let _ = writeln!(
         o,
         "emulated board: {} tracker frames in ({:.2} s at {} Hz), {} servo frames out, \

@@ -51,6 +51,9 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+    /// The live view (`--view`, `--listen`).
+    #[command(flatten)]
+    pub view: super::view::ViewArgs,
 }
 
 /// The summary of a run.
@@ -113,6 +116,16 @@ fn as_stop(e: PerformError) -> CmdError {
 /// Writes `region.bin` and, if the board performed, `servo_emulated.csv`
 /// into `out`.
 pub fn compare(inputs: &Inputs, out: &Path, pacing: Pacing) -> Result<Compared, CmdError> {
+    compare_watched(inputs, out, pacing, &|_| ())
+}
+
+/// [`compare`], showing `watch` the board's links while it performs.
+pub fn compare_watched(
+    inputs: &Inputs,
+    out: &Path,
+    pacing: Pacing,
+    watch: &dyn Fn(&crate::qemu::Taps),
+) -> Result<Compared, CmdError> {
     let start = Instant::now();
     let sources = inputs.source_list();
     let region_file = sim::out_file(out, "region.bin")?;
@@ -125,13 +138,14 @@ pub fn compare(inputs: &Inputs, out: &Path, pacing: Pacing) -> Result<Compared, 
     let native = perform::simulate(&inputs.region, &inputs.session)?;
     let channels = native.frame_targets.first().map_or(1, Vec::len);
     let expected = native.frame_targets.len();
-    let (board, raw) = perform::emulate(
+    let (board, raw) = perform::emulate_watched(
         staged.path(),
         &inputs.session,
         channels,
         expected,
         pacing,
         std::time::Duration::ZERO,
+        watch,
     )
     .map_err(as_stop)?;
     let stop = match &board.fault {
@@ -215,7 +229,20 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         raw,
         stop,
         run,
-    } = compare(&inputs, &args.out, pacing)?;
+    } = {
+        let name = args.recording.file_name().map_or_else(
+            || args.recording.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        );
+        let frames = if args.view.view {
+            perform::frames(&crate::import::csv::read_tracker_csv(&args.recording)?)?
+        } else {
+            Vec::new()
+        };
+        super::view::watched(&args.view, &inputs.region, &name, &frames, |watch| {
+            compare_watched(&inputs, &args.out, pacing, watch)
+        })?
+    };
     if let (Some(path), None) = (&args.raw_servo, &stop) {
         crate::save::save(path, &raw, &inputs.source_list())?;
     }

@@ -14,10 +14,14 @@
 //! would read (the bytes probe-rs stages, over erased flash).
 
 use super::CmdError;
-use crate::flash::{self, BLACKPILL, DEFAULT_CHIP, FlashError, Options};
+#[cfg(feature = "flash")]
+use crate::flash::Options;
+use crate::flash::{self, BLACKPILL, DEFAULT_CHIP, FlashError};
 use crate::{perform, rigfile};
+#[cfg(feature = "flash")]
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use marionette_core::{region, table};
+#[cfg(feature = "flash")]
 use probe_rs::flashing::{ProgressEvent, ProgressOperation};
 use std::path::{Path, PathBuf};
 
@@ -102,10 +106,17 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     if let (Some(t), false) = (&tables, args.no_check) {
         println!("board view: {}", flash::check_region(&BLACKPILL, t)?);
     }
-    flash::check_chip(&plan, &args.chip)?;
+    write(args, &plan)
+}
+
+/// Checks the plan against the chip's memory map, then (unless
+/// `--dry-run`) writes it through the first probe found.
+#[cfg(feature = "flash")]
+fn write(args: &Args, plan: &flash::Plan) -> Result<(), CmdError> {
+    flash::check_chip(plan, &args.chip)?;
     if args.dry_run {
         report(
-            flash::dry_read_back(&plan, &args.chip)?.as_ref(),
+            flash::dry_read_back(plan, &args.chip)?.as_ref(),
             args.no_check,
         )?;
         println!(
@@ -121,7 +132,7 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         verify: args.verify,
         dry_run: false,
     };
-    let read_back = flash::program(&mut session, &plan, options, |e| bars.event(e))?;
+    let read_back = flash::program(&mut session, plan, options, |e| bars.event(e))?;
     bars.finish();
     report(read_back.as_ref(), args.no_check)?;
     if plan.has_firmware() && !args.no_reset {
@@ -139,8 +150,22 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     Ok(())
 }
 
+/// Without probe-rs: the plan has been checked against the board layout;
+/// say how to get the chip checks and the writing.
+#[cfg(not(feature = "flash"))]
+fn write(_args: &Args, _plan: &flash::Plan) -> Result<(), CmdError> {
+    Err(
+        "this marionette was built without the `flash` feature (probe-rs), so it can plan and \
+         check the image (above) but not check the chip or write it; build it with the default \
+         features: `cargo run --release -p marionette-host -- flash ...` or \
+         `cargo install --path host`"
+            .into(),
+    )
+}
+
 /// Prints what the board reads back; an error if it would not arm (unless
 /// `--no-check`).
+#[cfg(feature = "flash")]
 fn report(read_back: Option<&flash::ReadBack>, no_check: bool) -> Result<(), CmdError> {
     let Some(rb) = read_back else {
         return Ok(());
@@ -159,11 +184,13 @@ fn report(read_back: Option<&flash::ReadBack>, no_check: bool) -> Result<(), Cmd
 }
 
 /// Progress bars for probe-rs' flashing events, one per operation.
+#[cfg(feature = "flash")]
 struct Bars {
     multi: MultiProgress,
     bars: [Option<ProgressBar>; 4],
 }
 
+#[cfg(feature = "flash")]
 impl Bars {
     fn new() -> Bars {
         Bars {

@@ -22,11 +22,13 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     let perform = icount::footprint(&crate::qemu::firmware_elf("perform")?)?;
     let stack = icount::stack_bytes(&console);
     let perform_stack = icount::perform_stack(PERFORM_FRAMES)?;
+    let layers_stack = icount::perform_stack_layers(PERFORM_FRAMES)?;
     if args.json {
         let doc = serde_json::json!({
             "rows": rows,
             "perform_footprint": perform,
             "perform_stack_bytes": perform_stack,
+            "perform_stack_layers_bytes": layers_stack,
             "bench_stack_bytes": stack,
         });
         println!("{}", serde_json::to_string_pretty(&doc)?);
@@ -39,12 +41,13 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         let show = |s: Option<u32>| s.map_or("?".into(), |s| s.to_string());
         println!(
             "\nperform firmware: {} B flash (text + rodata + vectors), {} B data, {} B bss; \
-             deepest stack {} B over {PERFORM_FRAMES} frames of the bundled recording; \
-             deepest stack in the bench: {} B",
+             deepest stack {} B over {PERFORM_FRAMES} frames of the bundled recording \
+             ({} B with two layers); deepest stack in the bench: {} B",
             perform.text,
             perform.data,
             perform.bss,
             show(perform_stack),
+            show(layers_stack),
             show(stack)
         );
     }

@@ -280,7 +280,8 @@ impl Senders {
 pub fn run(args: &Args) -> Result<(), CmdError> {
     let listener = Listener::bind(args.listen)?;
     let stop = AtomicBool::new(false);
-    let (summary, _) = live(args, &listener, &stop)?;
+    let (summary, _) = live(args, &listener, &stop)
+        .inspect_err(|e| crate::refusal::print_json_stop(&**e, args.json))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
@@ -321,7 +322,7 @@ pub fn live(
     let link = Link::Uart { baud };
     let sender = Sender::spawn(serial, link, args.frame);
     stream::handshake(&sender, &replies, &port, Duration::from_secs(10))?;
-    stream::arm(&sender, &replies)?;
+    stream::arm(&sender, &replies, &port)?;
     std::fs::create_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
     let mut recording = Recording::create(&args.out.join("live.csv"))?;
     if !quiet {

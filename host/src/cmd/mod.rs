@@ -20,6 +20,7 @@ pub mod solve;
 pub mod stream;
 pub mod synth;
 pub mod take;
+pub mod view;
 
 /// An error from any subcommand, printed by `main` as `marionette: <error>`.
 pub type CmdError = Box<dyn std::error::Error + Send + Sync>;

@@ -16,14 +16,22 @@
 //! `failsafe_timeout_ms`, `params`, `goals`, `rig_blob_bytes`, `boards`
 //! (`board`, `fits`, `problems`, `region_bytes`), `errors`, `warnings`
 //! (each `line`, `field`, `message`).
+//!
+//! `marionette rig --from-skeleton FILE.bvh|FILE.asf -o rig.toml` writes a
+//! rig made from a mocap skeleton ([`crate::skeleton`]): its segments and
+//! offsets, DOFs from the skeleton's rotation channels, generous limits and
+//! comments marking what to edit. It refuses to write over its input, and
+//! over any other existing file without `--force`.
 
 use super::CmdError;
 use crate::board::{self, BOARDS};
+use crate::build::spec::NameMap;
 use crate::rigfile::{self, RigFile};
+use crate::skeleton;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::ops::Range;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use toml::Spanned;
 
 /// The longest plausible segment (joint origin from its parent), metres.
@@ -31,10 +39,46 @@ pub const MAX_SEGMENT_M: f32 = 2.0;
 
 /// Arguments of `marionette rig`.
 #[derive(clap::Args, Debug)]
+#[command(args_conflicts_with_subcommands = true)]
 pub struct Args {
     /// What to do with a rig file.
     #[command(subcommand)]
-    pub command: RigCommand,
+    pub command: Option<RigCommand>,
+    /// Write a rig made from this mocap skeleton (`.bvh` or `.asf`): one
+    /// segment per joint, DOFs from its rotation channels, generous limits,
+    /// comments marking what to edit (needs `-o`).
+    #[arg(long, value_name = "FILE")]
+    pub from_skeleton: Option<PathBuf>,
+    /// The rig file to write (with `--from-skeleton`).
+    #[arg(
+        short = 'o',
+        long = "output",
+        value_name = "RIG.toml",
+        requires = "from_skeleton"
+    )]
+    pub output: Option<PathBuf>,
+    /// Overwrite an existing output file (never the skeleton itself).
+    #[arg(long, requires = "from_skeleton")]
+    pub force: bool,
+    /// BVH: metres per file unit (default: the CMU unit 0.056444; 0.01 for
+    /// centimetres). An ASF states its own.
+    #[arg(long, requires = "from_skeleton")]
+    pub scale: Option<f64>,
+    /// The rig's name (default: the skeleton file's stem).
+    #[arg(long, requires = "from_skeleton")]
+    pub name: Option<String>,
+    /// Remove this prefix from every joint name that has it.
+    #[arg(long, value_name = "PREFIX", requires = "from_skeleton")]
+    pub strip_prefix: Option<String>,
+    /// Rename a joint (its name after `--strip-prefix`): `OLD=NEW`; repeatable.
+    #[arg(long, value_name = "OLD=NEW", requires = "from_skeleton")]
+    pub rename: Vec<String>,
+    /// Leave out the joints matching this glob (`*` = anything); repeatable.
+    #[arg(long, value_name = "PATTERN", requires = "from_skeleton")]
+    pub drop: Vec<String>,
+    /// Keep only the joints matching this glob (the root always); repeatable.
+    #[arg(long, value_name = "PATTERN", requires = "from_skeleton")]
+    pub keep: Vec<String>,
 }
 
 /// The `rig` subcommands.
@@ -101,11 +145,81 @@ pub struct Report {
     pub warnings: Vec<Finding>,
 }
 
-/// Runs a `rig` subcommand.
+/// Runs a `rig` subcommand, or `rig --from-skeleton`.
 pub fn run(args: &Args) -> Result<(), CmdError> {
-    match &args.command {
-        RigCommand::Check(a) => check_command(a),
+    match (&args.command, &args.from_skeleton) {
+        (Some(RigCommand::Check(a)), _) => check_command(a),
+        (None, Some(skeleton)) => from_skeleton_command(args, skeleton),
+        (None, None) => Err(
+            "rig: give a subcommand (`rig check RIG`) or `--from-skeleton FILE -o RIG.toml`".into(),
+        ),
     }
+}
+
+fn from_skeleton_command(args: &Args, skeleton: &Path) -> Result<(), CmdError> {
+    let out = args
+        .output
+        .as_deref()
+        .ok_or("rig --from-skeleton: give the rig file to write with -o RIG.toml")?;
+    if same_file(skeleton, out) {
+        return Err(format!(
+            "{}: -o names the skeleton itself; refusing to write over the input",
+            out.display()
+        )
+        .into());
+    }
+    if out.exists() && !args.force {
+        return Err(format!(
+            "{}: exists; refusing to overwrite it (--force to replace it)",
+            out.display()
+        )
+        .into());
+    }
+    let options = skeleton::Options {
+        scale: args.scale,
+        name: args.name.clone(),
+        names: name_map(args)?,
+    };
+    let (rig, text) = skeleton::rig_text(skeleton, &options, &out.display().to_string())?;
+    std::fs::write(out, text).map_err(|e| format!("{}: cannot write: {e}", out.display()))?;
+    println!(
+        "{}: rig {:?} from {} ({} segments, {} DOFs); edit the lines marked EDIT, then \
+         `marionette rig check {}`",
+        out.display(),
+        rig.name,
+        rig.source,
+        rig.segments.len(),
+        rig.dof_count(),
+        out.display()
+    );
+    Ok(())
+}
+
+/// Whether `a` and `b` are the same existing file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
+    }
+}
+
+fn name_map(args: &Args) -> Result<NameMap, CmdError> {
+    let mut rename = std::collections::BTreeMap::new();
+    for r in &args.rename {
+        match r.split_once('=') {
+            Some((old, new)) if !old.is_empty() && !new.is_empty() => {
+                rename.insert(old.to_owned(), new.to_owned());
+            }
+            _ => return Err(format!("--rename {r:?}: expected OLD=NEW").into()),
+        }
+    }
+    Ok(NameMap {
+        strip_prefix: args.strip_prefix.clone(),
+        rename,
+        drop: args.drop.clone(),
+        keep: args.keep.clone(),
+        lines: [0; 4],
+    })
 }
 
 fn check_command(args: &CheckArgs) -> Result<(), CmdError> {

@@ -27,6 +27,7 @@ use super::CmdError;
 use crate::import::csv::TrackerSample;
 use crate::link::Link;
 use crate::perform::{self, Framing};
+use crate::refusal::Stop;
 use crate::sender::{Counts, Sender};
 use crate::{import, rigfile};
 use marionette_core::wire::{CommandKind, FrameTiming, Message, State, StatusReason, TrackerFrame};
@@ -68,6 +69,9 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+    /// The live view (`--view`, `--listen`), from the board's telemetry.
+    #[command(flatten)]
+    pub view: super::view::ViewArgs,
 }
 
 /// What a stream did, and what the board answered.
@@ -178,6 +182,18 @@ impl Replies {
         }
     }
 
+    /// The messages in the last `bytes` bytes received (the first may be
+    /// cut: it is skipped).
+    #[must_use]
+    pub fn recent(&self, bytes: usize) -> Vec<Message> {
+        let tail = self
+            .bytes
+            .lock()
+            .map(|v| v[v.len().saturating_sub(bytes)..].to_vec())
+            .unwrap_or_default();
+        perform::decode_replies(&tail)
+    }
+
     /// The messages received so far.
     #[must_use]
     pub fn messages(&self) -> Vec<Message> {
@@ -228,26 +244,34 @@ pub fn handshake(
             break st;
         }
         if Instant::now() > deadline {
-            return Err(format!(
-                "{port}: no answer from the board in {limit:?}: check the port, the baud rate, \
-                 and that the board runs Marionette's firmware"
-            )
-            .into());
+            return Err(Box::new(Stop::fault(
+                format!("the board on {port}"),
+                format!(
+                    "no answer from the board in {limit:?}: check the port, the baud rate, \
+                     and that the board runs Marionette's firmware"
+                ),
+            )));
         }
     };
     if status.reason != StatusReason::Ok || !status.table_ok {
-        let (what, todo) = crate::refusal::explain(status.reason);
-        return Err(format!(
-            "the board cannot arm ({:?}): {what}; to fix: {todo}",
+        let reason = if status.reason == StatusReason::Ok {
+            StatusReason::NoTable
+        } else {
             status.reason
-        )
-        .into());
+        };
+        return Err(Box::new(Stop::refused(
+            format!("the board on {port}"),
+            reason,
+            &[],
+            None,
+        )));
     }
     Ok(())
 }
 
-/// Arms the board; errors if it refuses.
-pub fn arm(sender: &Sender, replies: &Replies) -> Result<(), CmdError> {
+/// Arms the board; a refusal is a [`Stop`] with the board's `Status`
+/// reason (asked for again after the refused `Ack`).
+pub fn arm(sender: &Sender, replies: &Replies, port: &str) -> Result<(), CmdError> {
     sender.command(CommandKind::Arm);
     let ack = replies.wait_for(Duration::from_secs(2), |m| match m {
         Message::Ack(a) if a.seq == 0 => Some(a.ok),
@@ -255,8 +279,24 @@ pub fn arm(sender: &Sender, replies: &Replies) -> Result<(), CmdError> {
     });
     match ack {
         Some(true) => Ok(()),
-        Some(false) => Err("the board refused Arm: ask marionette stream's Status reason".into()),
-        None => Err("the board did not acknowledge Arm within 2 s".into()),
+        Some(false) => {
+            sender.hello();
+            let reason = replies.wait_for(Duration::from_secs(1), |m| match m {
+                Message::Status(st) if st.reason != StatusReason::Ok => Some(st.reason),
+                _ => None,
+            });
+            Err(Box::new(match reason {
+                Some(reason) => Stop::refused(format!("the board on {port}"), reason, &[], None),
+                None => Stop::fault(
+                    format!("the board on {port}"),
+                    "it refused Arm but its Status names no reason",
+                ),
+            }))
+        }
+        None => Err(Box::new(Stop::fault(
+            format!("the board on {port}"),
+            "the board did not acknowledge Arm within 2 s",
+        ))),
     }
 }
 
@@ -277,10 +317,10 @@ pub fn await_disarm(replies: &Replies, limit: Duration) -> bool {
 
 /// Offers each frame at its recorded time (or, `fast`, as soon as the
 /// last one went); returns the seconds it took.
-fn schedule(sender: &Sender, frames: &[TrackerFrame], fast: bool) -> f64 {
+fn schedule(sender: &Sender, frames: &[TrackerFrame], fast: bool, after: &dyn Fn(usize)) -> f64 {
     let start = Instant::now();
     let first = frames.first().map_or(0, |f| f.time_us);
-    for f in frames {
+    for (i, f) in frames.iter().enumerate() {
         if fast {
             sender.drain(Duration::from_secs(3600));
         } else {
@@ -288,6 +328,7 @@ fn schedule(sender: &Sender, frames: &[TrackerFrame], fast: bool) -> f64 {
             std::thread::sleep(due.saturating_sub(start.elapsed()));
         }
         sender.offer(*f);
+        after(i + 1);
     }
     start.elapsed().as_secs_f64()
 }
@@ -322,7 +363,8 @@ pub fn write_sent(path: &Path, frames: &[TrackerFrame]) -> Result<(), CmdError> 
 
 /// Streams the recording to the board and reports what happened.
 pub fn run(args: &Args) -> Result<(), CmdError> {
-    let (summary, _) = stream(args)?;
+    let (summary, _) =
+        stream(args).inspect_err(|e| crate::refusal::print_json_stop(&**e, args.json))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
@@ -334,7 +376,7 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
 /// Streams the recording to the board; returns the summary and every
 /// message the board sent.
 pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
-    let _rig = rigfile::load(&rigfile::resolve(&args.rig))?;
+    let rig = rigfile::load(&rigfile::resolve(&args.rig))?;
     let frames = perform::frames(&import::csv::read_tracker_csv(&args.recording)?)?;
     let port = serialport::new(&args.port, args.baud)
         .timeout(Duration::from_millis(50))
@@ -347,8 +389,25 @@ pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
     let link = Link::Uart { baud: args.baud };
     let sender = Sender::spawn(port, link, args.frame);
     handshake(&sender, &replies, &args.port, Duration::from_secs(5))?;
-    arm(&sender, &replies)?;
-    let seconds = schedule(&sender, &frames, args.fast);
+    arm(&sender, &replies, &args.port)?;
+    let mut rig_blob = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
+    let n = rig
+        .desc()
+        .to_blob(&mut rig_blob)
+        .map_err(|e| format!("{}: {e:?}", args.rig.display()))?;
+    rig_blob.truncate(n);
+    let title = format!(
+        "{}: {}",
+        rig.name(),
+        args.recording
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+    );
+    let seconds = super::view::watched_board(&args.view, &rig_blob, &title, &frames, |hook| {
+        Ok(schedule(&sender, &frames, args.fast, &|offered| {
+            hook(offered, sender.counts().dropped, &|| replies.recent(4096));
+        }))
+    })?;
     sender.drain(Duration::from_secs(2));
     sender.command(CommandKind::Disarm);
     let failed = sender.failed();

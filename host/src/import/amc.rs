@@ -918,7 +918,7 @@ impl Asf {
     }
 
     /// Joints of the [`Motion`] and, per bone, its joint index.
-    fn motion_joints(&self) -> (Vec<Joint>, Vec<usize>) {
+    pub(crate) fn motion_joints(&self) -> (Vec<Joint>, Vec<usize>) {
         let mut joints = vec![Joint {
             name: "root".into(),
             parent: None,
