@@ -104,6 +104,7 @@ fn vmc_over_udp_drives_the_emulated_board_as_sim_on_the_recorded_session() {
         seconds: None,
         frame: Framing::Compact,
         out: dir.path().join("out"),
+        take: Some(dir.path().join("live.take")),
         json: true,
     };
     let listener = Listener::bind(args.listen).unwrap();
@@ -202,6 +203,12 @@ fn vmc_over_udp_drives_the_emulated_board_as_sim_on_the_recorded_session() {
         (checked.compared, checked.mismatches),
         (followed.compared, 0)
     );
+    // The take (#17) holds the session sent and the board's servo outputs.
+    let take = marionette_host::take::Take::load(&dir.path().join("live.take")).unwrap();
+    assert_eq!(take.source, "live");
+    assert_eq!(take.info().sent.tracker_frames, frames.len());
+    let taken: Vec<Vec<u16>> = take.outputs().into_iter().map(|o| o.2).collect();
+    assert_eq!(taken, outputs);
     let errors = replies.iter().rev().find_map(|m| match m {
         Message::Telemetry(t) => Some(t.errors.total()),
         _ => None,

@@ -864,6 +864,7 @@ fn arb_kind() -> impl Strategy<Value = CommandKind> {
         Just(CommandKind::RequestStatus),
         (any::<u8>(), any::<u16>())
             .prop_map(|(channel, target)| CommandKind::Jog { channel, target }),
+        any::<bool>().prop_map(|play| CommandKind::Show { play }),
     ]
 }
 

@@ -13,7 +13,10 @@
 //!    servo link ([`Board::servos_ready`]) gets the newest targets once it
 //!    can take them;
 //! 2. every frame period of the board clock, calls [`Performer::tick`], which
-//!    eases the servos to rest after the fail-safe time-out or a disarm.
+//!    eases the servos to rest after the fail-safe time-out or a disarm, and
+//!    plays the flashed show while it plays;
+//! 3. a press of the board's show button ([`Board::show_button`]) starts
+//!    the flashed show.
 //!
 //! A rig whose servo back-end the board cannot drive ([`Board::SUPPORT`])
 //! never arms: its `Status` reason is `Unsupported`.
@@ -109,6 +112,9 @@ fn perform<B: Board>(board: &mut B, performer: &mut BoardPerformer<'_, '_>) -> O
     let mut pending = false;
     loop {
         board.feed_watchdog();
+        if board.show_button() {
+            performer.play_show();
+        }
         let n = match read_ready(board, &mut buf) {
             Ok(n) => n,
             Err(outcome) => return outcome,

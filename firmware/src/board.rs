@@ -90,6 +90,13 @@ pub trait Board {
         0
     }
 
+    /// Whether the board's show button was pressed (true once per press,
+    /// debounced; always false on a board without one): the app then
+    /// starts the flashed show ([`marionette_core::perform::Performer::play_show`]).
+    fn show_button(&mut self) -> bool {
+        false
+    }
+
     /// Whether a `Disarm` command ends the run once the servos are at rest
     /// (the emulated board, so tests end cleanly); a real board keeps going.
     const ENDS_ON_DISARM: bool = false;

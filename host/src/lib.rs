@@ -24,6 +24,8 @@ pub mod render;
 pub mod rigfile;
 pub mod save;
 pub mod sender;
+pub mod show;
 pub mod skeleton;
+pub mod take;
 #[cfg(feature = "view")]
 pub mod view;

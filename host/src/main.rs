@@ -54,6 +54,12 @@ enum Command {
     Rig(cmd::rig::Args),
     /// Perform from a live source (VMC / OSC over UDP) on the emulated or a real board.
     Live(cmd::live::Args),
+    /// Takes: summarize (`info`), edit (`edit`), export curves and BVH (`export`).
+    Take(cmd::take::Args),
+    /// Send a take's input again to the emulated board or a serial port.
+    Replay(cmd::replay::Args),
+    /// Shows played from flash with no host: `build` one from takes.
+    Show(cmd::show::Args),
     /// The demo watched live in the browser (`demo --view`; read-only, localhost by default).
     View(cmd::demo::Args),
 }
@@ -77,6 +83,9 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => cmd::calibrate::run(&args),
         Command::Rig(args) => cmd::rig::run(&args),
         Command::Live(args) => cmd::live::run(&args),
+        Command::Take(args) => cmd::take::run(&args),
+        Command::Replay(args) => cmd::replay::run(&args),
+        Command::Show(args) => cmd::show::run(&args),
         Command::View(mut args) => {
             args.view.view = true;
             cmd::demo::run(&args)

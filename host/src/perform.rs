@@ -351,10 +351,23 @@ pub fn simulate_outputs(
     Ok(outputs.into_iter().map(|o| o.2).collect())
 }
 
+/// Every servo output of a native run in the order a board sends them, each
+/// with the board-clock time of the step that produced it (the message's
+/// time for a received message, the tick's clock for a tick) and whether a
+/// tracker frame drove it: `(time_us, frame, targets)`.
+pub fn simulate_timed(
+    region_bytes: &[u8],
+    session: &[Sent],
+) -> Result<Vec<(u32, bool, Vec<u16>)>, PerformError> {
+    let (_, outputs) = replay(region_bytes, session, None, &mut |_, _| {})?;
+    Ok(outputs.into_iter().map(|o| (o.3, o.1, o.2)).collect())
+}
+
 /// One output of a native run, in order: the index of the session message
 /// it came from (or before which its tick ran; the session's length for the
-/// easing after it), whether a tracker frame drove it, and the targets.
-type Output = (usize, bool, Vec<u16>);
+/// easing after it), whether a tracker frame drove it, the targets, and the
+/// board-clock time of the step.
+type Output = (usize, bool, Vec<u16>, u32);
 
 /// [`simulate_with`], or with the board's fail-safe trips instead of the
 /// replay's own: `trips` holds `(message index, ticks)`, and each of those
@@ -382,8 +395,8 @@ fn replay(
     let (mut run, mut outputs) = (Run::default(), Vec::new());
     let mut clock = session.first().map_or(0, |s| s.time_us);
     for (i, sent) in session.iter().enumerate() {
-        let mut step = |p: &Performer<'_, '_>, u: Update| {
-            record(&mut run, &mut outputs, (i, &wire), p, u, observe);
+        let mut step = |p: &Performer<'_, '_>, u: Update, now: u32| {
+            record(&mut run, &mut outputs, (i, now, &wire), p, u, observe);
         };
         // Board-clock ticks in the gap before this message.
         while sent.time_us.wrapping_sub(clock) >= period
@@ -392,7 +405,7 @@ fn replay(
             clock = clock.wrapping_add(period);
             if trips.is_none() || !performer.armed() {
                 let update = performer.tick(clock);
-                step(&performer, update);
+                step(&performer, update, clock);
             }
         }
         let forced = trips
@@ -402,14 +415,16 @@ fn replay(
             .map(|t| t.1)
             .sum::<u32>();
         for k in 0..forced {
-            let late = timeout_us.wrapping_add(k.wrapping_mul(period));
-            let update = performer.tick(sent.time_us.wrapping_add(late));
-            step(&performer, update);
+            let late = sent
+                .time_us
+                .wrapping_add(timeout_us.wrapping_add(k.wrapping_mul(period)));
+            let update = performer.tick(late);
+            step(&performer, update, late);
         }
         let mut input = sent.bytes.as_slice();
         while !input.is_empty() {
             let update = performer.receive(&mut input, sent.time_us, &mut NoCycles);
-            step(&performer, update);
+            step(&performer, update, sent.time_us);
         }
     }
     // After the session: tick until every servo is at rest (bounded).
@@ -422,7 +437,7 @@ fn replay(
         record(
             &mut run,
             &mut outputs,
-            (session.len(), &wire),
+            (session.len(), clock, &wire),
             &performer,
             update,
             observe,
@@ -434,12 +449,13 @@ fn replay(
 /// The view of targets as the servo link carries them.
 type Wire<'w> = dyn Fn(&[u16]) -> Vec<u16> + 'w;
 
-/// Records one update: `(message, wire)` are the session message it came
-/// from and the view of targets as the servo link carries them.
+/// Records one update: `(message, now, wire)` are the session message it
+/// came from, the board clock and the view of targets as the servo link
+/// carries them.
 fn record(
     run: &mut Run,
     outputs: &mut Vec<Output>,
-    (message, wire): (usize, &Wire<'_>),
+    (message, now, wire): (usize, u32, &Wire<'_>),
     performer: &Performer<'_, '_>,
     update: Update,
     observe: &mut dyn FnMut(&Performer<'_, '_>, &Update),
@@ -450,11 +466,11 @@ fn record(
     let targets = wire(performer.targets());
     match update.outputs {
         Some(Cause::Frame(_)) => {
-            outputs.push((message, true, targets.clone()));
+            outputs.push((message, true, targets.clone(), now));
             run.frame_targets.push(targets);
         }
-        Some(Cause::Rest) => {
-            outputs.push((message, false, targets.clone()));
+        Some(Cause::Rest | Cause::Show(_)) => {
+            outputs.push((message, false, targets.clone(), now));
             run.rest_targets.push(targets);
         }
         None => {}
@@ -481,11 +497,15 @@ pub struct Followed {
     /// The outputs compared that differ from the board's, or that the
     /// board did not send.
     pub mismatches: usize,
+    /// The board-clock time of each output of the replay, in order (see
+    /// [`simulate_timed`]): the times of the board's outputs where they
+    /// match.
+    pub times: Vec<u32>,
 }
 
 /// The sequence number of each session message that carries one (compact
 /// frames' extended as the board extends them).
-fn session_seqs(session: &[Sent]) -> Vec<Option<u32>> {
+pub fn session_seqs(session: &[Sent]) -> Vec<Option<u32>> {
     let mut last = None;
     session
         .iter()
@@ -567,6 +587,7 @@ pub fn follow(
         unplaced,
         compared: span,
         mismatches,
+        times: outputs.iter().map(|o| o.3).collect(),
     })
 }
 

@@ -63,7 +63,9 @@ fn every_page_is_listed_and_every_page_has_examples() {
             "goals.md",
             "recording.md",
             "rig.md",
+            "show.md",
             "spec.md",
+            "take.md",
             "view.md"
         ]
     );
@@ -190,6 +192,60 @@ fn the_recording_example_is_read() {
     }
 }
 
+/// The hex bytes of a layout block (`text`): each line's leading run of
+/// two-digit hex tokens, up to the comment; lines of placeholders
+/// (`c0 c1 …`) end it.
+fn hex_bytes(block: &str) -> Vec<u8> {
+    let mut out = Vec::new();
+    for line in block.lines() {
+        if line.starts_with("c0 c1") {
+            break;
+        }
+        for tok in line.split_whitespace() {
+            match u8::from_str_radix(tok, 16) {
+                Ok(b) if tok.len() == 2 => out.push(b),
+                _ => break,
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn the_take_example_is_the_bytes_the_host_writes() {
+    use marionette_host::take::{Event, EventKind, Take};
+    let block = of("take.md", "text").remove(0);
+    let take = Take {
+        channels: 2,
+        period_us: 1000,
+        region: vec![0xAA, 0xBB],
+        source: "t".into(),
+        events: vec![
+            Event {
+                time_us: 5,
+                kind: EventKind::Sent,
+                data: vec![0x00, 0x01],
+            },
+            Event::output(6, true, &[0x1770, 0x0001]),
+        ],
+    };
+    let bytes = take.to_bytes().unwrap();
+    assert_eq!(hex_bytes(&block), bytes[..bytes.len() - 4]);
+}
+
+#[test]
+fn the_show_example_is_the_bytes_the_host_writes_and_decodes() {
+    use marionette_core::show::Show;
+    let block = of("show.md", "text").remove(0);
+    let frames = vec![vec![6000u16], vec![6002], vec![6004]];
+    let blob =
+        marionette_host::show::encode(&frames, &[Some(None)], 0x0102_0304_0506_0708, 1000, 4, 1)
+            .unwrap();
+    assert_eq!(hex_bytes(&block), blob[..blob.len() - 4]);
+    let show = Show::parse(&blob).unwrap();
+    assert_eq!(show.target(0, 1), Some(6002));
+    assert!(show.looping() && !show.at_boot());
+}
 #[cfg(feature = "view")]
 #[test]
 fn the_view_event_example_is_a_snapshot() {

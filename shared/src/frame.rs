@@ -115,6 +115,7 @@ use crate::pose::{self, LocalPose, MAX_SEGMENTS, Pose};
 pub use crate::region::Region;
 use crate::rig::{Idle, MAX_PARAMS, Rig};
 use crate::servo::{Slew, quarter_us};
+use crate::show::{Cursor as ShowCursor, Show};
 use crate::solve::{self, Solver, SolverState};
 use crate::table::{Kind, Table};
 use crate::wire::{List, MAX_GOALS, MAX_SENSORS, MAX_SERVOS, STAGES, Sensor, ValidTrackerFrame};
@@ -953,6 +954,34 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             }
         }
         self.step_dt = Some(dt);
+    }
+
+    /// One frame of a show ([`crate::show`]): every servo the show drives
+    /// follows its target for `frame` through its slew limiter
+    /// ([`Slew::track`]: never outside its calibrated range, never faster
+    /// than its speed limit); a servo the show does not drive goes back to
+    /// rest the same way. Any jog ends. Never inlined: kept out of the
+    /// frame's path.
+    #[inline(never)]
+    pub fn play_step(&mut self, show: &Show<'_>, cursor: &mut ShowCursor, frame: u32) {
+        let period = self.rig.frame_period_s();
+        self.set_step(period);
+        self.jog = None;
+        for servo in self.rig.servos() {
+            let ch = usize::from(servo.channel);
+            let (Some(Some(slew)), Some(t)) = (self.slews.get_mut(ch), self.targets.get_mut(ch))
+            else {
+                continue;
+            };
+            let goal = cursor
+                .target(show, u16::from(servo.channel), frame)
+                .unwrap_or_else(|| quarter_us(servo.rest_us));
+            *t = slew.track(goal);
+        }
+        cursor.played(frame);
+        self.resting = false;
+        self.released = false;
+        self.driven = true;
     }
 
     /// One rest-ward step of every servo at the frame period (a jogged

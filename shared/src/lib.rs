@@ -65,6 +65,7 @@ pub mod pose;
 pub mod region;
 pub mod rig;
 pub mod servo;
+pub mod show;
 pub mod solve;
 pub mod table;
 pub mod wire;

@@ -53,6 +53,21 @@
 //! back to rest and is the loop's again. `Arm` is refused while a jog is
 //! under way, including its easing back.
 //!
+//! ## Shows
+//!
+//! A region may hold a show ([`crate::show`]) built for its rig. The board
+//! plays it while disarmed: from boot if the show says so, or from a
+//! trigger ([`Performer::play_show`]: the board's button). Each
+//! [`Performer::tick`] plays one frame: every servo the show drives steps
+//! towards the frame's target through its slew limiter (within its
+//! calibrated range and speed and acceleration limits), and the outputs go
+//! out every frame ([`Cause::Show`]). At its end the show starts again
+//! (loop) or the servos ease to rest. `Arm` (the host takes over),
+//! `Disarm`, the command `Show { play: false }` or a board that cannot
+//! drive its rig stop it (`Show { play: true }` starts it from its first
+//! frame); tracker frames
+//! taken while it plays move nothing; `Jog` is refused while it plays.
+//!
 //! ## Replies
 //!
 //! - `Hello` → `Status` (with `request_seq: None`).
@@ -75,6 +90,7 @@
 
 use crate::frame::{Cycles, Pipeline, Region, stage};
 use crate::pose::{MAX_SEGMENTS, Pose};
+use crate::show::{Cursor as ShowCursor, Show};
 use crate::solve::SolverState;
 use crate::wire::{
     Ack, CommandKind, ErrorCounters, FrameTiming, Incoming, List, Message, PROTOCOL_VERSION,
@@ -95,6 +111,8 @@ pub enum Cause {
     /// Disarmed or timed out: easing to rest, or a calibration jog
     /// moving its channel.
     Rest,
+    /// A frame of the flashed show (its index; see [Shows](self#shows)).
+    Show(u32),
 }
 
 /// What one call of [`Performer::receive`] or [`Performer::tick`] produced.
@@ -265,6 +283,11 @@ pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
     timing: Timing,
     frames_out: u32,
     disarms: u32,
+    /// The region's show, if it has a valid one for the rig.
+    show: Option<Show<'a>>,
+    /// The show's next frame, while it plays.
+    playing: Option<u32>,
+    cursor: ShowCursor,
 }
 
 impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
@@ -284,6 +307,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         let (period_us, timeout_ms) = pipeline.as_ref().map_or((IDLE_PERIOD_US, 0), |p| {
             (p.rig().frame_period_us(), p.rig().failsafe_timeout_ms())
         });
+        let show = region.show.filter(|_| pipeline.is_some());
         Self {
             pipeline,
             receiver: Receiver::new(),
@@ -300,6 +324,58 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             timing: Timing::default(),
             frames_out: 0,
             disarms: 0,
+            show,
+            playing: show.filter(Show::at_boot).map(|_| 0),
+            cursor: ShowCursor::default(),
+        }
+    }
+
+    /// The show frame to play next, while the flashed show plays.
+    #[must_use]
+    pub fn playing(&self) -> Option<u32> {
+        self.playing
+    }
+
+    /// Starts the flashed show from its first frame (a trigger: a button,
+    /// or the host); false if there is none, the board is armed, or it
+    /// cannot drive its rig. Never inlined: a cold path kept out of the
+    /// frame's.
+    #[inline(never)]
+    pub fn play_show(&mut self) -> bool {
+        let ok = self.show.is_some() && !self.armed && !self.refused;
+        if ok {
+            self.playing = Some(0);
+            self.cursor = ShowCursor::default();
+        }
+        ok
+    }
+
+    /// Stops the show, if it plays: the servos ease to rest.
+    pub fn stop_show(&mut self) {
+        self.playing = None;
+    }
+
+    /// One frame of the show (see [Shows](self#shows)). Never inlined (as
+    /// [`Performer::play_show`]).
+    #[inline(never)]
+    fn show_tick(&mut self, frame: u32) -> Update {
+        let (Some(show), Some(pipeline)) = (&self.show, &mut self.pipeline) else {
+            self.playing = None;
+            return Update::NONE;
+        };
+        pipeline.play_step(show, &mut self.cursor, frame);
+        let next = frame.saturating_add(1);
+        self.playing = if next < show.frames() {
+            Some(next)
+        } else if show.looping() {
+            self.cursor = ShowCursor::default();
+            Some(0)
+        } else {
+            None
+        };
+        Update {
+            outputs: Some(Cause::Show(frame)),
+            reply: None,
         }
     }
 
@@ -313,6 +389,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         }
         self.refused = true;
         self.armed = false;
+        self.playing = None;
         if let Some(pipeline) = &mut self.pipeline {
             pipeline.end_jog();
         }
@@ -492,6 +569,9 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     /// fail-safe (see the module doc) and eases to rest while disarmed.
     /// Returns outputs only when they moved.
     pub fn tick(&mut self, now_us: u32) -> Update {
+        if let (false, Some(frame)) = (self.armed, self.playing) {
+            return self.show_tick(frame);
+        }
         let lost = self.armed && now_us.wrapping_sub(self.last_frame_us) >= self.timeout_us;
         if lost {
             let ticks = self.trip_ticks.map_or(1, |t| t.saturating_add(1));
@@ -541,6 +621,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
                 let ready = self.reason == StatusReason::Ok
                     && self.pipeline.as_ref().is_some_and(|p| !p.jogging());
                 if ready && !self.armed {
+                    self.playing = None;
                     self.armed = true;
                     self.last_frame_us = now_us;
                     self.timing = Timing::default();
@@ -548,6 +629,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
                 ready
             }
             CommandKind::Disarm => {
+                self.playing = None;
                 self.end_trip(c.seq());
                 self.disarm();
                 self.disarms = self.disarms.wrapping_add(1);
@@ -564,6 +646,11 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             }
             CommandKind::RequestStatus => return Message::Status(self.status(Some(c.seq()))),
             CommandKind::Jog { channel, target } => self.jog(channel, target),
+            CommandKind::Show { play: true } => self.play_show(),
+            CommandKind::Show { play: false } => {
+                self.stop_show();
+                true
+            }
         };
         Message::Ack(Ack { seq: c.seq(), ok })
     }
@@ -572,6 +659,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
     /// if refused.
     fn jog(&mut self, channel: u8, target: u16) -> bool {
         let drivable = !self.armed
+            && self.playing.is_none()
             && !self.refused
             && self.reason() != StatusReason::ProtocolMismatch
             && self.reason != StatusReason::Unsupported;
@@ -591,7 +679,8 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         let seq = frame.seq();
         let dt = pipeline.take(frame);
         if !self.armed {
-            let moved = pipeline.rest_step();
+            // While the show plays, a frame moves nothing.
+            let moved = self.playing.is_none() && pipeline.rest_step();
             return Update {
                 outputs: moved.then_some(Cause::Rest),
                 reply: None,

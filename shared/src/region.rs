@@ -30,7 +30,9 @@
 //!
 //! Entry kinds ([`EntryKind`]): 1 the rig blob ([`crate::rig`]; exactly one),
 //! 2 a table blob ([`crate::table`]; the first one is table 0), 3 a layer
-//! list ([`crate::layer`]; at most one, see [Layers](self#layers)). A reader
+//! list ([`crate::layer`]; at most one, see [Layers](self#layers)), 4 a
+//! show ([`crate::show`]; the first one is played; added within version 1,
+//! as the rule below allows: a reader that predates it skips it). A reader
 //! skips entries of kinds it does not know, so later formats can add entries
 //! (more tables, a show) that an older firmware ignores; a change that an
 //! older reader would misread bumps [`VERSION`], and a reader refuses a
@@ -87,6 +89,7 @@ use crate::crc::{Crc32, crc32};
 use crate::layer::{Layer, Layers, MAX_LAYERS};
 use crate::pose::MAX_SEGMENTS;
 use crate::rig::{self, MAX_PARAMS, Rig, RigError};
+use crate::show::{self, Show, ShowError};
 use crate::table::{Kind, Table, TableError};
 use crate::wire::StatusReason;
 
@@ -119,6 +122,8 @@ impl EntryKind {
     pub const TABLE: Self = Self(2);
     /// A layer list ([`crate::layer`]; at most one).
     pub const LAYERS: Self = Self(3);
+    /// A show ([`crate::show`]; the first one is played).
+    pub const SHOW: Self = Self(4);
     /// A whole region nested as one entry, which the live loop ignores: the
     /// instruction-count bench carries its layered variant so.
     pub const NESTED: Self = Self(0x100);
@@ -148,6 +153,15 @@ impl<'a> Entry<'a> {
     pub const fn table(bytes: &'a [u8]) -> Self {
         Self {
             kind: EntryKind::TABLE,
+            bytes,
+        }
+    }
+
+    /// The show blob `bytes`.
+    #[must_use]
+    pub const fn show(bytes: &'a [u8]) -> Self {
+        Self {
+            kind: EntryKind::SHOW,
             bytes,
         }
     }
@@ -439,6 +453,10 @@ pub struct Region<'a, const N: usize = MAX_SEGMENTS> {
     pub refused_layer: Option<u8>,
     /// Why the board cannot arm ([`StatusReason::Ok`] if it can).
     pub reason: StatusReason,
+    /// The first show, if it is valid and built for the rig.
+    pub show: Option<Show<'a>>,
+    /// Why the region's show was refused, if it has one that was.
+    pub show_error: Option<ShowError>,
 }
 
 impl<'a> Region<'a> {
@@ -471,6 +489,8 @@ impl<'a, const N: usize> Region<'a, N> {
         layer_tables: [None; MAX_LAYERS],
         refused_layer: None,
         reason: StatusReason::NoRig,
+        show: None,
+        show_error: None,
     };
 
     /// [`Region::parse_sized`] in place, for a caller that keeps the region
@@ -485,6 +505,8 @@ impl<'a, const N: usize> Region<'a, N> {
         self.layer_tables = [None; MAX_LAYERS];
         self.refused_layer = None;
         self.reason = StatusReason::NoRig;
+        self.show = None;
+        self.show_error = None;
         match directory(bytes) {
             Ok(dir) => self.parse_entries(&dir),
             Err(RegionError::Magic) if is_legacy(bytes) => self.parse_legacy(bytes),
@@ -501,6 +523,14 @@ impl<'a, const N: usize> Region<'a, N> {
         };
         if !self.parse_rig(rig.bytes) {
             return;
+        }
+        if let (Some(entry), Some(rig)) = (dir.find(EntryKind::SHOW, 0), &self.rig) {
+            let parsed = Show::parse(entry.bytes)
+                .and_then(|s| show::check_rig(&s, rig.rig_hash()).map(|()| s));
+            (self.show, self.show_error) = match parsed {
+                Ok(s) => (Some(s), None),
+                Err(e) => (None, Some(e)),
+            };
         }
         if let Some(list) = dir.find(EntryKind::LAYERS, 0) {
             self.parse_layers(dir, list.bytes);

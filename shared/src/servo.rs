@@ -233,6 +233,25 @@ impl Slew {
         self.step
     }
 
+    /// Follows a planned trajectory (a show, [`crate::show`]) one frame:
+    /// the step towards `target` is clamped to the speed limit, and the
+    /// pulse stays within `[low, high]`. Unlike [`Slew::update`] it neither
+    /// brakes ahead of the target nor shapes the acceleration (the show's
+    /// curves were made by [`Slew::update`] and keep its limits): a
+    /// trajectory within the speed limit passes unchanged.
+    pub fn track(&mut self, target: u16) -> u16 {
+        let target = i32::from(target.max(self.low).min(self.high));
+        let here = i32::from(self.position);
+        let vmax = i32::from(self.limits.max_step);
+        let step = (target - here).max(-vmax).min(vmax);
+        let next = (here + step)
+            .max(i32::from(self.low))
+            .min(i32::from(self.high));
+        self.step = next - here;
+        self.position = next as u16;
+        self.position
+    }
+
     /// Moves one frame towards `target` (quarter-µs) and returns the new pulse.
     pub fn update(&mut self, target: u16) -> u16 {
         // max/min rather than clamp throughout: clamp asserts lo ≤ hi, a

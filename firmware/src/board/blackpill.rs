@@ -162,9 +162,10 @@ impl Micros {
 fn route_pins(gpioa: &pac::GPIOA) {
     gpioa.afrl().modify(|_, w| w.afrl2().af7().afrl3().af7());
     gpioa.afrh().modify(|_, w| w.afrh9().af7().afrh10().af7());
+    // PA0, the KEY button to ground (an input at reset): pulled up.
     gpioa
         .pupdr()
-        .modify(|_, w| w.pupdr3().pull_up().pupdr10().pull_up());
+        .modify(|_, w| w.pupdr0().pull_up().pupdr3().pull_up().pupdr10().pull_up());
     gpioa
         .ospeedr()
         .modify(|_, w| w.ospeedr2().medium_speed().ospeedr9().medium_speed());
@@ -181,7 +182,13 @@ pub struct BlackPill {
     watchdog: Watchdog,
     micros: Micros,
     reset_cause: ResetCause,
+    /// Since when the show button has been held (µs), and whether this
+    /// press was reported.
+    key: Option<(u32, bool)>,
 }
+
+/// How long the show button must be held to count, µs.
+const KEY_DEBOUNCE_US: u32 = 20_000;
 
 impl BlackPill {
     /// Clocks the chip at 100 MHz from the 25 MHz crystal, opens both links
@@ -226,6 +233,7 @@ impl BlackPill {
             watchdog,
             micros: Micros::start(),
             reset_cause,
+            key: None,
         })
     }
 
@@ -273,6 +281,18 @@ impl Board for BlackPill {
 
     fn cycles(&mut self) -> u32 {
         cortex_m::peripheral::DWT::cycle_count()
+    }
+
+    fn show_button(&mut self) -> bool {
+        if !self.servo.key_down() {
+            self.key = None;
+            return false;
+        }
+        let now = self.micros.update();
+        let (since, reported) = self.key.unwrap_or((now, false));
+        let fire = !reported && now.wrapping_sub(since) >= KEY_DEBOUNCE_US;
+        self.key = Some((since, reported || fire));
+        fire
     }
 
     fn feed_watchdog(&mut self) {

@@ -69,6 +69,10 @@ pub struct Args {
     /// How many frames of the figure to draw (evenly spaced in time).
     #[arg(long, default_value_t = 4)]
     pub frames: usize,
+    /// Also save the session as a take (docs/take.md): the input sent,
+    /// the board's outputs and replies, with times.
+    #[arg(long)]
+    pub take: Option<PathBuf>,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
@@ -731,6 +735,9 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
             println!("{}", serde_json::to_string_pretty(&emulated)?);
         }
         return Err(Box::new(stop));
+    }
+    if let Some(path) = &args.take {
+        super::emulate::save_take(path, "demo", &inputs, &board)?;
     }
     let servo_csv = PathBuf::from(emulated.servo_csv.clone().unwrap_or_default());
     let mut files = vec![

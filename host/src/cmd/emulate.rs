@@ -44,6 +44,10 @@ pub struct Args {
     /// Also save the raw servo-bus bytes here.
     #[arg(long)]
     pub raw_servo: Option<PathBuf>,
+    /// Also save the session as a take (docs/take.md): the input sent,
+    /// the board's outputs and replies, with times.
+    #[arg(long)]
+    pub take: Option<PathBuf>,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
@@ -191,6 +195,19 @@ pub fn compare_watched(
     })
 }
 
+/// Saves a run of `inputs` as a take at `path`.
+pub fn save_take(
+    path: &Path,
+    source: &str,
+    inputs: &Inputs,
+    run: &perform::Run,
+) -> Result<(), CmdError> {
+    let take = crate::take::Take::of_run(source, &inputs.region, &inputs.session, run)?;
+    crate::save::check(path, &inputs.source_list())?;
+    take.save(path)?;
+    Ok(())
+}
+
 /// Runs the performance and prints its summary.
 pub fn run(args: &Args) -> Result<(), CmdError> {
     let inputs = sim::load_with(
@@ -204,11 +221,14 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     } else {
         Pacing::AsFastAsPossible
     };
-    if let Some(path) = &args.raw_servo {
+    for path in args.raw_servo.iter().chain(&args.take) {
         crate::save::check(path, &inputs.source_list())?;
     }
     let Compared {
-        summary, raw, stop, ..
+        summary,
+        raw,
+        stop,
+        run,
     } = {
         let name = args.recording.file_name().map_or_else(
             || args.recording.display().to_string(),
@@ -225,6 +245,9 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     };
     if let (Some(path), None) = (&args.raw_servo, &stop) {
         crate::save::save(path, &raw, &inputs.source_list())?;
+    }
+    if let (Some(path), None) = (&args.take, &stop) {
+        save_take(path, "emulate", &inputs, &run)?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);

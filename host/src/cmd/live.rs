@@ -84,6 +84,10 @@ pub struct Args {
     /// `region.bin`, `servo_live.bin`).
     #[arg(long, default_value = "out/live")]
     pub out: PathBuf,
+    /// Also save the session as a take (docs/take.md; the emulated board
+    /// only: a real board's servo output is not seen).
+    #[arg(long)]
+    pub take: Option<PathBuf>,
     /// Print the summary as JSON (and nothing else).
     #[arg(long)]
     pub json: bool,
@@ -395,7 +399,7 @@ pub fn live(
             (region, servo),
             &recording.path,
             args.frame,
-            &messages,
+            (&messages, args.take.as_deref()),
         )?),
     };
     let summary = Summary {
@@ -479,7 +483,7 @@ fn check(
     (region, servo): (&Path, &Path),
     recording: &Path,
     framing: Framing,
-    replies: &[Message],
+    (replies, take): (&[Message], Option<&Path>),
 ) -> Result<Checked, CmdError> {
     board.wait(Duration::from_secs(30))?;
     let region_bytes = std::fs::read(region).map_err(|e| format!("{}: {e}", region.display()))?;
@@ -492,6 +496,17 @@ fn check(
     let bytes = std::fs::read(servo).map_err(|e| format!("{}: {e}", servo.display()))?;
     let outputs = format.decode(&bytes);
     let followed = perform::follow(&region_bytes, &session, &outputs, replies)?;
+    if let Some(path) = take {
+        let mut frame_targets = outputs.clone();
+        let rest_targets = frame_targets.split_off(frames.len().min(frame_targets.len()));
+        let run = perform::Run {
+            frame_targets,
+            rest_targets,
+            replies: replies.to_vec(),
+            ..perform::Run::default()
+        };
+        crate::take::Take::of_run("live", &region_bytes, &session, &run)?.save(path)?;
+    }
     Ok(Checked {
         servo_bytes: servo.display().to_string(),
         region: region.display().to_string(),

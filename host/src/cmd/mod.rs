@@ -12,11 +12,14 @@ pub mod live;
 pub mod plot;
 pub mod record;
 pub mod render;
+pub mod replay;
 pub mod rig;
+pub mod show;
 pub mod sim;
 pub mod solve;
 pub mod stream;
 pub mod synth;
+pub mod take;
 pub mod view;
 
 /// An error from any subcommand, printed by `main` as `marionette: <error>`.

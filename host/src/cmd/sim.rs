@@ -32,6 +32,10 @@ pub struct Args {
     /// How tracker frames travel: the compact frame (quantized) or `f32`.
     #[arg(long, value_enum, default_value_t = Framing::Compact)]
     pub frame: Framing,
+    /// Also save the session as a take (docs/take.md): the input sent,
+    /// the board's outputs and replies, with times.
+    #[arg(long)]
+    pub take: Option<PathBuf>,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
@@ -207,6 +211,9 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     let stop = refusal::check(NATIVE, &run.replies, &inputs.region, None);
     if stop.is_none() {
         write_servo_csv(&csv, &inputs, &run)?;
+        if let Some(path) = &args.take {
+            super::emulate::save_take(path, "sim", &inputs, &run)?;
+        }
     }
     let summary = Summary {
         frames: inputs.frames,

@@ -171,6 +171,14 @@ pub enum CommandKind {
         /// Target, quarter units (0: end the jog), `≤ 0x3FFF`.
         target: u16,
     },
+    /// Tag 8 (version 4): start (`play: true`, from its first frame) or
+    /// stop the show flashed in the board's region, which it plays while
+    /// disarmed (see [`crate::perform`], Shows). Refused (`Ack` not ok)
+    /// while armed or without a show.
+    Show {
+        /// Start (true) or stop (false).
+        play: bool,
+    },
 }
 
 /// Why the board is (not) ready. Variant order is the wire contract.

@@ -92,7 +92,8 @@
 //! - [`CommandKind`]: 0 `Arm`, 1 `Disarm`, 2 `SelectTable(u8)`,
 //!   3 `SelectClip(u8)`, 4 `SetGoalWeight { goal: u8, weight: f32 }`,
 //!   5 `Boresight { sensor: u8 }`, 6 `RequestStatus`,
-//!   7 `Jog { channel: u8, target: u16 }` (v3; calibration, below).
+//!   7 `Jog { channel: u8, target: u16 }` (v3; calibration, below),
+//!   8 `Show { play: bool }` (v4; start or stop the flashed show).
 //! - [`StatusReason`]: 0 `Ok`, 1 `NoTable`, 2 `BadMagic`, 3 `BadVersion`
 //!   (table format), 4 `BadCrc`, 5 `BadBounds`, 6 `ProtocolMismatch`, 7 `NoRig`,
 //!   8 `RigMismatch`, 9 `Unsupported`, 10 `RigTooLarge` (a valid rig with
@@ -184,7 +185,7 @@
 //!
 //! ## Versioning
 //!
-//! [`PROTOCOL_VERSION`] is 3. The host opens a session with `Hello`; the board
+//! [`PROTOCOL_VERSION`] is 4. The host opens a session with `Hello`; the board
 //! answers with a `Status` carrying its own version. A board accepts a host
 //! version from [`MIN_PROTOCOL_VERSION`] (1) to its own; on any other it
 //! counts a `version` error, disarms, reports `reason = ProtocolMismatch`,
@@ -211,6 +212,11 @@
 //! never send `Jog`). A version-2 board refuses a version-3 `Hello`
 //! (`ProtocolMismatch`) instead of counting each `Jog` as a `decode` error,
 //! so a host learns that its board cannot be jogged before it tries.
+//!
+//! Version 4 only **appended** the command kind 8 (`Show { play }`: start
+//! or stop the show flashed beside the rig and tables), on the same terms:
+//! a board keeps accepting version-1 to version-3 hosts, and a version-3
+//! board refuses a version-4 `Hello`.
 //!
 //! ## Worked example
 //!
@@ -281,7 +287,7 @@ use crate::crc::{Crc32, crc32};
 use postcard::ser_flavors::Flavor;
 
 /// The protocol version this crate speaks.
-pub const PROTOCOL_VERSION: u16 = 3;
+pub const PROTOCOL_VERSION: u16 = 4;
 /// The oldest host version a board accepts: every version-1 host message is
 /// a valid version-2 message (see [Versioning](self#versioning)).
 pub const MIN_PROTOCOL_VERSION: u16 = 1;

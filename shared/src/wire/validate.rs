@@ -283,7 +283,8 @@ impl Command {
             | CommandKind::Disarm
             | CommandKind::SelectTable(_)
             | CommandKind::SelectClip(_)
-            | CommandKind::RequestStatus => true,
+            | CommandKind::RequestStatus
+            | CommandKind::Show { .. } => true,
         };
         if ok {
             Ok(ValidCommand {

@@ -95,6 +95,9 @@ enum Active {
 /// The servo outputs of the Black Pill.
 pub struct Servos {
     active: Active,
+    /// Port A once the back-end is set up (its pins configured; PA0 is
+    /// the show button, read through it).
+    pins: Option<pac::GPIOA>,
     /// When the PCA9685 was last written, µs.
     last_us: Option<u32>,
     /// The board clock at the last [`Servos::ready`], µs.
@@ -107,6 +110,7 @@ impl Servos {
     pub fn new(parts: Parts) -> Self {
         Self {
             active: Active::None(Some(parts)),
+            pins: None,
             last_us: None,
             now_us: 0,
         }
@@ -155,7 +159,19 @@ impl Servos {
             }
             _ => return Err(refuse),
         };
+        self.pins = Some(gpioa);
         Ok(())
+    }
+
+    /// Whether PA0 (the KEY button, to ground, pulled up) is held down.
+    #[must_use]
+    pub fn key_down(&self) -> bool {
+        let port = match (&self.active, &self.pins) {
+            (Active::None(Some(parts)), _) => &parts.gpioa,
+            (_, Some(pins)) => pins,
+            _ => return false,
+        };
+        port.idr().read().idr0().bit_is_clear()
     }
 
     /// Whether a frame may go out now (see the module doc); `now_us` is the

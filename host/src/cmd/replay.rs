@@ -1,0 +1,228 @@
+//! `marionette replay TAKE`: sends a take's input again, to the emulated
+//! board (`--emulated`, booted from the take's own table region) or to a
+//! board on a serial port (`--port DEV`), at the take's times (`--speed`
+//! scales them) or as fast as the link takes it (`--fast`).
+//!
+//! On the emulated board every servo output is compared with the take's:
+//! they must be bit-identical (the command fails otherwise). On a port the
+//! board's servo bus is not seen; its replies are counted.
+
+use super::CmdError;
+use super::stream::{Replies, await_disarm};
+use crate::perform::{self, Pacing, Sent};
+use crate::take::Take;
+use marionette_core::wire::Message;
+use serde::Serialize;
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Arguments of `marionette replay`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The take (docs/take.md).
+    pub take: PathBuf,
+    /// Replay on the emulated board, booted from the take's table region.
+    #[arg(long, conflicts_with = "port")]
+    pub emulated: bool,
+    /// Replay to a board on this serial port (its flash must hold the
+    /// take's rig and tables).
+    #[arg(long)]
+    pub port: Option<String>,
+    /// Baud rate of the port's tracker link.
+    #[arg(long, default_value_t = 921_600)]
+    pub baud: u32,
+    /// Time scale: 2 sends twice as fast as the take was recorded.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Send every message as soon as the link takes it.
+    #[arg(long)]
+    pub fast: bool,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// What a replay did.
+#[derive(Debug, Serialize)]
+pub struct Summary {
+    /// Where it went: `emulated` or the port.
+    pub board: String,
+    /// Messages sent.
+    pub sent: usize,
+    /// Servo outputs in the take.
+    pub take_outputs: usize,
+    /// Servo outputs the board sent (`null` on a port: not seen).
+    pub board_outputs: Option<usize>,
+    /// Outputs that differ from the take's, missing or extra ones counted
+    /// (`null` on a port).
+    pub mismatches: Option<usize>,
+    /// Replies (messages) the board sent.
+    pub replies: usize,
+    /// Fail-safe trips the board reported in this replay, and in the take
+    /// (a host that stalls past the rig's time-out trips the board, rightly:
+    /// its outputs then differ from a take that did not trip).
+    pub failsafe_trips: [usize; 2],
+    /// Wall-clock seconds.
+    pub seconds: f64,
+}
+
+/// The take's session with its times scaled by `1 / speed` (from the first).
+#[must_use]
+pub fn scaled(session: &[Sent], speed: f64) -> Vec<Sent> {
+    let first = session.first().map_or(0, |s| s.time_us);
+    session
+        .iter()
+        .map(|s| Sent {
+            time_us: first
+                .wrapping_add((f64::from(s.time_us.wrapping_sub(first)) / speed).round() as u32),
+            bytes: s.bytes.clone(),
+        })
+        .collect()
+}
+
+/// How many outputs differ between `a` and `b` (a missing one counts).
+#[must_use]
+pub fn mismatches(a: &[Vec<u16>], b: &[Vec<u16>]) -> usize {
+    let differ = a.iter().zip(b).filter(|(x, y)| x != y).count();
+    differ + a.len().abs_diff(b.len())
+}
+
+/// Replays on the emulated board; returns the summary.
+pub fn emulated(take: &Take, pacing: Pacing, speed: f64) -> Result<Summary, CmdError> {
+    let start = Instant::now();
+    let staged = tempfile::NamedTempFile::new()?;
+    std::fs::write(staged.path(), &take.region)
+        .map_err(|e| format!("{}: {e}", staged.path().display()))?;
+    let session = scaled(&take.session(), speed);
+    let (board, _) = perform::emulate(
+        staged.path(),
+        &session,
+        usize::from(take.channels),
+        take.frame_outputs(),
+        pacing,
+        Duration::ZERO,
+    )?;
+    if let Some(fault) = &board.fault {
+        return Err(format!("the emulated board stopped: {fault}").into());
+    }
+    let sent: Vec<Vec<u16>> = board
+        .frame_targets
+        .iter()
+        .chain(&board.rest_targets)
+        .cloned()
+        .collect();
+    let expected: Vec<Vec<u16>> = take.outputs().into_iter().map(|o| o.2).collect();
+    Ok(Summary {
+        board: "emulated".into(),
+        sent: session.len(),
+        take_outputs: expected.len(),
+        board_outputs: Some(sent.len()),
+        mismatches: Some(mismatches(&expected, &sent)),
+        replies: board.replies.len(),
+        failsafe_trips: [
+            perform::reported_trips(&board.replies).len(),
+            perform::reported_trips(&take.replies()).len(),
+        ],
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Replays to a board on a serial port: says the take's `Hello` until the
+/// board answers, then sends the rest at its times.
+pub fn on_port(
+    take: &Take,
+    port_name: &str,
+    baud: u32,
+    pacing: Pacing,
+    speed: f64,
+) -> Result<(Summary, Vec<Message>), CmdError> {
+    let start = Instant::now();
+    let session = scaled(&take.session(), speed);
+    let mut port = serialport::new(port_name, baud)
+        .timeout(Duration::from_millis(50))
+        .open()
+        .map_err(|e| format!("{port_name}: {e}"))?;
+    let reader = port.try_clone().map_err(|e| format!("{port_name}: {e}"))?;
+    let replies = Replies::spawn(reader);
+    let (hello, rest) = session.split_at(1.min(session.len()));
+    let mut answered = false;
+    for _ in 0..5 {
+        for s in hello {
+            port.write_all(&s.bytes)
+                .map_err(|e| format!("{port_name}: {e}"))?;
+        }
+        let status = replies.wait_for(Duration::from_secs(1), |m| match m {
+            Message::Status(s) if s.request_seq.is_none() => Some(()),
+            _ => None,
+        });
+        if status.is_some() {
+            answered = true;
+            break;
+        }
+    }
+    if !answered {
+        return Err(format!("{port_name}: no answer from the board in 5 s").into());
+    }
+    perform::pace(rest, pacing, |bytes| port.write_all(bytes))
+        .map_err(|e| format!("{port_name}: {e}"))?;
+    await_disarm(&replies, Duration::from_secs(20));
+    let messages = replies.finish();
+    let summary = Summary {
+        board: port_name.to_string(),
+        sent: session.len(),
+        take_outputs: take.outputs().len(),
+        board_outputs: None,
+        mismatches: None,
+        replies: messages.len(),
+        failsafe_trips: [
+            perform::reported_trips(&messages).len(),
+            perform::reported_trips(&take.replies()).len(),
+        ],
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    Ok((summary, messages))
+}
+
+/// Replays the take and prints the summary.
+pub fn run(args: &Args) -> Result<(), CmdError> {
+    let take = Take::load(&args.take)?;
+    if !(args.speed.is_finite() && args.speed > 0.0) {
+        return Err(format!("--speed {}: must be a positive number", args.speed).into());
+    }
+    let pacing = if args.fast {
+        Pacing::AsFastAsPossible
+    } else {
+        Pacing::RealTime
+    };
+    let summary = match (&args.port, args.emulated) {
+        (Some(port), false) => on_port(&take, port, args.baud, pacing, args.speed)?.0,
+        (None, true) => emulated(&take, pacing, args.speed)?,
+        _ => return Err("replay: say where, --emulated or --port DEV".into()),
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        println!(
+            "replay on {}: {} messages sent, {} replies, fail-safe trips {} (take: {}); \
+             {} servo outputs in the take, {} from the board, {} differ ({:.1} s)",
+            summary.board,
+            summary.sent,
+            summary.replies,
+            summary.failsafe_trips[0],
+            summary.failsafe_trips[1],
+            summary.take_outputs,
+            summary
+                .board_outputs
+                .map_or_else(|| "not seen".into(), |n| n.to_string()),
+            summary
+                .mismatches
+                .map_or_else(|| "-".into(), |n| n.to_string()),
+            summary.seconds
+        );
+    }
+    if summary.mismatches.is_some_and(|m| m > 0) {
+        return Err("the board's servo output differs from the take's".into());
+    }
+    Ok(())
+}
