@@ -273,3 +273,40 @@ fn stream_says_why_the_board_never_arms() {
     );
     assert!(!out.join("sent.csv").exists(), "nothing was streamed");
 }
+
+/// `replay` of a take whose region holds a rig but no table: the emulated
+/// board refuses to arm (`NoTable`), and `replay` says so, exits 3 and
+/// carries the reason in `--json`, as `emulate` does.
+#[test]
+fn replay_says_why_the_board_never_arms() {
+    use marionette_host::take::{Event, EventKind, Take};
+    let dir = tempfile::tempdir().unwrap();
+    let rec = short_recording(dir.path());
+    let rig = rigfile::load(&repo().join("rigs/humanoid16.toml")).unwrap();
+    let mut blob = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
+    let n = rig.desc().to_blob(&mut blob).unwrap();
+    let frames =
+        perform::frames(&marionette_host::import::csv::read_tracker_csv(&rec).unwrap()).unwrap();
+    let take = Take {
+        channels: 16,
+        period_us: 1000,
+        region: perform::region(&blob[..n], None),
+        source: "no table".into(),
+        events: perform::session(&frames)
+            .unwrap()
+            .into_iter()
+            .map(|s| Event {
+                time_us: s.time_us,
+                kind: EventKind::Sent,
+                data: s.bytes,
+            })
+            .collect(),
+    };
+    let path = dir.path().join("no_table.take");
+    take.save(&path).unwrap();
+    refused(
+        &["replay", s(&path), "--emulated", "--fast"],
+        "NoTable",
+        "table region",
+    );
+}

@@ -628,8 +628,8 @@ fn seam_cost(poses: &[Vec<Seg>], a: usize, b: usize) -> f64 {
 
 /// The loop cut within `search` frames of `given` at each end (inside the
 /// clip, at least half the given cycle long) whose seam closes best
-/// ([`seam_cost`]); ties keep the cut nearer the given one. `search = 0`
-/// keeps the given cut.
+/// (the least mean per-joint jump between its two ends); ties keep the
+/// cut nearer the given one. `search = 0` keeps the given cut.
 #[must_use]
 pub fn best_cut(poses: &[Vec<Seg>], given: [usize; 2], search: usize) -> Seam {
     let [a, b] = given;

@@ -10,6 +10,7 @@
 use super::CmdError;
 use super::stream::{Replies, await_disarm};
 use crate::perform::{self, Pacing, Sent};
+use crate::refusal::{self, Stop};
 use crate::take::Take;
 use marionette_core::wire::Message;
 use serde::Serialize;
@@ -88,6 +89,23 @@ pub fn mismatches(a: &[Vec<u16>], b: &[Vec<u16>]) -> usize {
     differ + a.len().abs_diff(b.len())
 }
 
+/// The emulated board, as refusals name it.
+const EMULATED_BOARD: &str = "the emulated board";
+
+/// Why a replay's board never armed (its `Status` reason), or stopped: a
+/// refusal always; a board that never answered `Arm` only if the take's
+/// own board did (a take may hold no `Arm`, a show played disarmed).
+fn stop_of(
+    board: &str,
+    replies: &[Message],
+    take: &Take,
+    known: Option<&crate::board::Board>,
+) -> Option<Stop> {
+    let stop = refusal::check(board, replies, &take.region, known)?;
+    let take_armed = refusal::check(board, &take.replies(), &take.region, known).is_none();
+    (take_armed || stop.exit_code() == refusal::EXIT_REFUSED).then_some(stop)
+}
+
 /// Replays on the emulated board; returns the summary.
 pub fn emulated(take: &Take, pacing: Pacing, speed: f64) -> Result<Summary, CmdError> {
     let start = Instant::now();
@@ -104,7 +122,15 @@ pub fn emulated(take: &Take, pacing: Pacing, speed: f64) -> Result<Summary, CmdE
         Duration::ZERO,
     )?;
     if let Some(fault) = &board.fault {
-        return Err(format!("the emulated board stopped: {fault}").into());
+        return Err(Box::new(Stop::fault(EMULATED_BOARD, fault.clone())));
+    }
+    if let Some(stop) = stop_of(
+        EMULATED_BOARD,
+        &board.replies,
+        take,
+        Some(&crate::board::EMULATED),
+    ) {
+        return Err(Box::new(stop));
     }
     let sent: Vec<Vec<u16>> = board
         .frame_targets
@@ -162,12 +188,19 @@ pub fn on_port(
         }
     }
     if !answered {
-        return Err(format!("{port_name}: no answer from the board in 5 s").into());
+        return Err(Box::new(Stop::fault(
+            format!("the board on {port_name}"),
+            "no answer to Hello in 5 s: check the port, the baud rate, and that the board runs \
+             Marionette's firmware",
+        )));
     }
     perform::pace(rest, pacing, |bytes| port.write_all(bytes))
         .map_err(|e| format!("{port_name}: {e}"))?;
     await_disarm(&replies, Duration::from_secs(20));
     let messages = replies.finish();
+    if let Some(stop) = stop_of(&format!("the board on {port_name}"), &messages, take, None) {
+        return Err(Box::new(stop));
+    }
     let summary = Summary {
         board: port_name.to_string(),
         sent: session.len(),
@@ -196,10 +229,11 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         Pacing::RealTime
     };
     let summary = match (&args.port, args.emulated) {
-        (Some(port), false) => on_port(&take, port, args.baud, pacing, args.speed)?.0,
-        (None, true) => emulated(&take, pacing, args.speed)?,
+        (Some(port), false) => on_port(&take, port, args.baud, pacing, args.speed).map(|r| r.0),
+        (None, true) => emulated(&take, pacing, args.speed),
         _ => return Err("replay: say where, --emulated or --port DEV".into()),
-    };
+    }
+    .inspect_err(|e| refusal::print_json_stop(&**e, args.json))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
