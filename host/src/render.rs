@@ -158,9 +158,14 @@ macro_rules! with_backend {
         let temp = crate::save::temp_beside(path).map_err(|e| fail(e.to_string()))?;
         match $format {
             Format::Png => {
-                let $root = BitMapBackend::new(temp.path(), $size).into_drawing_area();
-                $draw.map_err(fail)?;
-                $root.present().map_err(|e| fail(de(e)))?;
+                let (w, h): (u32, u32) = $size;
+                let mut rgb = vec![0u8; w as usize * h as usize * 3];
+                {
+                    let $root = BitMapBackend::with_buffer(&mut rgb, $size).into_drawing_area();
+                    $draw.map_err(fail)?;
+                    $root.present().map_err(|e| fail(de(e)))?;
+                }
+                write_png(temp.path(), &rgb, w, h).map_err(fail)?;
             }
             Format::Svg => {
                 let $root = SVGBackend::new(temp.path(), $size).into_drawing_area();
@@ -170,6 +175,17 @@ macro_rules! with_backend {
         }
         crate::save::commit(temp, path).map_err(|e| fail(e.to_string()))
     }};
+}
+
+/// Writes 8-bit RGB pixels, `w` × `h`, as a PNG file.
+fn write_png(path: &Path, rgb: &[u8], w: u32, h: u32) -> Result<(), String> {
+    let file = std::fs::File::create(path).map_err(|e| e.to_string())?;
+    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), w, h);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
+    writer.write_image_data(rgb).map_err(|e| e.to_string())?;
+    writer.finish().map_err(|e| e.to_string())
 }
 
 /// Which side of the body a segment is on (it only picks the colour).

@@ -90,7 +90,7 @@ max_accel = 60.0
 fn start(rig_text: &str) -> Option<(Tmux, std::path::PathBuf, tempfile::TempDir)> {
     if !tmux_installed() {
         eprintln!(
-            "SKIPPED: tmux is not installed (run .ci/setup); calibrate's terminal test needs it"
+            "SKIPPED: tmux is not installed (run .ci/setup tests); calibrate's terminal test needs it"
         );
         return None;
     }

@@ -1,6 +1,6 @@
 //! The live view in a real browser (#17): `marionette demo --view` on the
 //! emulated board, and headless Chromium (Debian package `chromium`, which
-//! `.ci/setup` installs when missing) taking screenshots of the page at two
+//! `.ci/setup tests` installs when missing) taking screenshots of the page at two
 //! instants while the board performs. The page must have rendered (the
 //! figure's views are not blank) and the figure must have moved between
 //! the two (pixels of the views differ).
@@ -17,7 +17,7 @@ fn chromium() -> PathBuf {
         .iter()
         .map(PathBuf::from)
         .find(|p| p.exists())
-        .expect("headless Chromium is needed: run .ci/setup (Debian package `chromium`)")
+        .expect("headless Chromium is needed: run .ci/setup tests (Debian package `chromium`)")
 }
 
 /// A screenshot of `url` after the page has had `settle` to draw.
