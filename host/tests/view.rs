@@ -29,6 +29,8 @@ fn screenshot(url: &str, path: &Path, settle: Duration) -> Vec<u8> {
             "--headless",
             "--no-sandbox",
             "--disable-gpu",
+            // Containers often have a small /dev/shm.
+            "--disable-dev-shm-usage",
             "--hide-scrollbars",
             "--window-size=1280,900",
         ])
