@@ -237,6 +237,14 @@ fn a_recording_beyond_the_wire_clock_is_refused_before_streaming() {
     );
 }
 
+/// A table region holding the humanoid16 rig and no table.
+fn rig_without_table() -> Vec<u8> {
+    let rig = rigfile::load(&repo().join("rigs/humanoid16.toml")).unwrap();
+    let mut blob = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
+    let n = rig.desc().to_blob(&mut blob).unwrap();
+    perform::region(&blob[..n], None)
+}
+
 /// `stream` to a board (the emulated one on a pty, as a real board's
 /// serial port) whose flash holds a rig but no table: the board answers
 /// `Hello` with `NoTable`, and `stream` says so, with what to do, exits 3
@@ -246,11 +254,8 @@ fn stream_says_why_the_board_never_arms() {
     let dir = tempfile::tempdir().unwrap();
     let rec = short_recording(dir.path());
     let rig_path = repo().join("rigs/humanoid16.toml");
-    let rig = rigfile::load(&rig_path).unwrap();
-    let mut blob = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
-    let n = rig.desc().to_blob(&mut blob).unwrap();
     let region_file = dir.path().join("region.bin");
-    std::fs::write(&region_file, perform::region(&blob[..n], None)).unwrap();
+    std::fs::write(&region_file, rig_without_table()).unwrap();
     let elf = marionette_host::qemu::firmware_elf("perform").unwrap();
     let board =
         marionette_host::qemu::PtyBoard::start(&elf, &region_file, &dir.path().join("uart1.bin"))
@@ -282,15 +287,12 @@ fn replay_says_why_the_board_never_arms() {
     use marionette_host::take::{Event, EventKind, Take};
     let dir = tempfile::tempdir().unwrap();
     let rec = short_recording(dir.path());
-    let rig = rigfile::load(&repo().join("rigs/humanoid16.toml")).unwrap();
-    let mut blob = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
-    let n = rig.desc().to_blob(&mut blob).unwrap();
     let frames =
         perform::frames(&marionette_host::import::csv::read_tracker_csv(&rec).unwrap()).unwrap();
     let take = Take {
         channels: 16,
         period_us: 1000,
-        region: perform::region(&blob[..n], None),
+        region: rig_without_table(),
         source: "no table".into(),
         events: perform::session(&frames)
             .unwrap()

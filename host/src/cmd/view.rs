@@ -49,6 +49,7 @@ pub type BoardHook<'h> = &'h dyn Fn(usize, u64, &dyn Fn() -> Vec<Message>);
 
 /// Runs `session` (a performance on a real board, `stream` or `live`, of
 /// the rig `rig_blob`) under the live view when `--view` asks for it.
+#[cfg_attr(not(feature = "view"), allow(unused_variables))]
 pub fn watched_board<R>(
     args: &ViewArgs,
     rig_blob: &[u8],
@@ -56,10 +57,50 @@ pub fn watched_board<R>(
     frames: &[TrackerFrame],
     session: impl FnOnce(BoardHook<'_>) -> Result<R, CmdError>,
 ) -> Result<R, CmdError> {
-    if !args.view {
-        return session(&|_, _, _| ());
+    if args.view {
+        #[cfg(feature = "view")]
+        return with_board_view(args, rig_blob, title, frames, session);
+        #[cfg(not(feature = "view"))]
+        return Err(NO_VIEW.into());
     }
-    with_board_view(args, rig_blob, title, frames, session)
+    session(&|_, _, _| ())
+}
+
+/// Runs `session` (an emulated performance of `region`, given a watcher
+/// of the board's links) under the live view when `--view` asks for it.
+#[cfg_attr(not(feature = "view"), allow(unused_variables))]
+pub fn watched<R>(
+    args: &ViewArgs,
+    region: &[u8],
+    title: &str,
+    frames: &[TrackerFrame],
+    session: impl FnOnce(&dyn Fn(&Taps)) -> Result<R, CmdError>,
+) -> Result<R, CmdError> {
+    if args.view {
+        #[cfg(feature = "view")]
+        return with_view(args, region, title, frames, session);
+        #[cfg(not(feature = "view"))]
+        return Err(NO_VIEW.into());
+    }
+    session(&|_| ())
+}
+
+/// Starts the view asked for and says where it is.
+#[cfg(feature = "view")]
+fn start(args: &ViewArgs) -> Result<crate::view::View, CmdError> {
+    let view = crate::view::View::start(args.listen)?;
+    eprintln!("marionette: live view at {}", view.url());
+    Ok(view)
+}
+
+/// The servo channels a rig drives (its highest channel + 1).
+#[cfg(feature = "view")]
+fn channels(rig: &marionette_core::rig::Rig<'_>) -> usize {
+    rig.servos()
+        .iter()
+        .map(|s| usize::from(s.channel) + 1)
+        .max()
+        .unwrap_or(1)
 }
 
 #[cfg(feature = "view")]
@@ -71,48 +112,18 @@ fn with_board_view<R>(
     session: impl FnOnce(BoardHook<'_>) -> Result<R, CmdError>,
 ) -> Result<R, CmdError> {
     use crate::perform::ServoFormat;
-    use crate::view::{View, watch::Watch};
+    use crate::view::watch::Watch;
     let (rig, _) =
         marionette_core::rig::Rig::parse(rig_blob).map_err(|e| format!("the rig: {e:?}"))?;
-    let view = View::start(args.listen)?;
-    eprintln!("marionette: live view at {}", view.url());
-    let channels = rig.servos().len().max(1);
-    let watch = Watch::new(
-        &view,
-        &rig,
-        title,
-        frames,
-        ServoFormat::Maestro { channels },
-    );
+    let view = start(args)?;
+    // A real board's targets come from its telemetry: the format is unused.
+    let format = ServoFormat::Maestro {
+        channels: channels(&rig),
+    };
+    let watch = Watch::new(&view, &rig, title, frames, format);
     let result = session(&|sent, drops, recent| watch.replies(recent, sent, drops));
     view.end(linger(args));
     result
-}
-
-#[cfg(not(feature = "view"))]
-fn with_board_view<R>(
-    _args: &ViewArgs,
-    _rig_blob: &[u8],
-    _title: &str,
-    _frames: &[TrackerFrame],
-    _session: impl FnOnce(BoardHook<'_>) -> Result<R, CmdError>,
-) -> Result<R, CmdError> {
-    Err(NO_VIEW.into())
-}
-
-/// Runs `session` (an emulated performance of `region`, given a watcher
-/// of the board's links) under the live view when `--view` asks for it.
-pub fn watched<R>(
-    args: &ViewArgs,
-    region: &[u8],
-    title: &str,
-    frames: &[TrackerFrame],
-    session: impl FnOnce(&dyn Fn(&Taps)) -> Result<R, CmdError>,
-) -> Result<R, CmdError> {
-    if !args.view {
-        return session(&|_| ());
-    }
-    with_view(args, region, title, frames, session)
 }
 
 #[cfg(feature = "view")]
@@ -124,22 +135,16 @@ fn with_view<R>(
     session: impl FnOnce(&dyn Fn(&Taps)) -> Result<R, CmdError>,
 ) -> Result<R, CmdError> {
     use crate::perform::ServoFormat;
-    use crate::view::{View, watch::Watch};
+    use crate::view::watch::Watch;
     use marionette_core::frame::Region;
     let parsed = Region::parse(region);
     let Some(rig) = parsed.rig.as_ref() else {
         return session(&|_| ());
     };
-    let channels = rig
-        .servos()
-        .iter()
-        .map(|s| usize::from(s.channel) + 1)
-        .max()
-        .unwrap_or(1);
+    let channels = channels(rig);
     let format =
         ServoFormat::of_region(region, channels).unwrap_or(ServoFormat::Maestro { channels });
-    let view = View::start(args.listen)?;
-    eprintln!("marionette: live view at {}", view.url());
+    let view = start(args)?;
     let watch = Watch::new(&view, rig, title, frames, format);
     let last = std::cell::RefCell::new(None);
     let result = session(&|taps: &Taps| {
@@ -151,21 +156,6 @@ fn with_view<R>(
     }
     view.end(linger(args));
     result
-}
-
-#[cfg(not(feature = "view"))]
-fn with_view<R>(
-    _args: &ViewArgs,
-    _region: &[u8],
-    _title: &str,
-    _frames: &[TrackerFrame],
-    _session: impl FnOnce(&dyn Fn(&Taps)) -> Result<R, CmdError>,
-) -> Result<R, CmdError> {
-    Err(
-        "this marionette was built without the `view` feature: build it with the default \
-         features (`cargo run --release -p marionette-host -- …` or `cargo install --path host`)"
-            .into(),
-    )
 }
 
 impl Default for ViewArgs {
