@@ -187,6 +187,7 @@ fn sample_layers(mask: &[u8]) -> [Layer<'_>; 2] {
             root: Root::Apply,
             fade_s: 0.5,
             weight: Source::Param(4),
+            rate: Source::Param(2),
             axes: a,
             axis_count: 1,
             mask,
@@ -196,6 +197,7 @@ fn sample_layers(mask: &[u8]) -> [Layer<'_>; 2] {
             root: Root::Drop,
             fade_s: 0.0,
             weight: Source::Const(1.0),
+            rate: Source::Const(1.0),
             axes: b,
             axis_count: 3,
             mask,
@@ -209,9 +211,14 @@ fn a_layer_list_round_trips_and_every_byte_is_checked() {
     let layers = sample_layers(&mask);
     let mut out = vec![0u8; layer::len(2, 5)];
     assert_eq!(Layers::write(&layers, 5, &mut out), Ok(out.len()));
-    // 8-byte prefix, two layers of 120 + 8 (5 mask bytes padded), CRC.
-    assert_eq!(out.len(), 8 + 2 * (120 + 8) + 4);
-    assert_eq!(&out[..8], b"MLAY\x01\x00\x02\x05");
+    // 8-byte prefix, two layers of 136 + 8 (5 mask bytes padded), CRC.
+    assert_eq!(out.len(), 8 + 2 * (136 + 8) + 4);
+    assert_eq!(&out[..8], b"MLAY\x02\x00\x02\x05");
+    // Layer 0's rate source after its weight: kind 1 (parameter), index 2.
+    assert_eq!(
+        &out[8 + 24..8 + 40],
+        &[1, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]
+    );
     let parsed = Layers::parse(&out).unwrap();
     assert_eq!(parsed.as_slice(), &layers[..]);
     assert_eq!(parsed.segments(), 5);
@@ -229,7 +236,7 @@ fn a_layer_list_round_trips_and_every_byte_is_checked() {
         let crc = marionette_core::crc::crc32(&b[..n]);
         b[n..].copy_from_slice(&crc.to_le_bytes());
     };
-    let second = 8 + 128;
+    let second = 8 + 144;
     for (at, value) in [(second + 1, 2u8), (second + 3, 1), (second + 24, 9)] {
         let mut b = out.clone();
         b[at] = value;
@@ -241,10 +248,32 @@ fn a_layer_list_round_trips_and_every_byte_is_checked() {
         );
     }
     let mut b = out.clone();
-    b[4] = 2;
+    b[4] = 3;
     fix_crc(&mut b);
-    assert_eq!(Layers::parse(&b), Err(LayerError::Version(2)));
-    assert_eq!(LayerError::Version(2).reason(), StatusReason::BadVersion);
+    assert_eq!(Layers::parse(&b), Err(LayerError::Version(3)));
+    assert_eq!(LayerError::Version(3).reason(), StatusReason::BadVersion);
+}
+
+#[test]
+fn a_version_1_layer_list_still_reads_with_rate_1() {
+    let mask = [0u8, 255, 128, 7, 0];
+    let mut layers = sample_layers(&mask);
+    let mut v2 = vec![0u8; layer::len(2, 5)];
+    Layers::write(&layers, 5, &mut v2).unwrap();
+    // Version 1 by hand: version 1, and each layer without the 16 bytes of
+    // its rate source (offset 24 of the layer), then a new CRC.
+    let mut v1 = b"MLAY\x01\x00\x02\x05".to_vec();
+    for layer in v2[8..v2.len() - 4].chunks(144) {
+        v1.extend_from_slice(&layer[..24]);
+        v1.extend_from_slice(&layer[40..]);
+    }
+    let crc = marionette_core::crc::crc32(&v1);
+    v1.extend_from_slice(&crc.to_le_bytes());
+    assert_eq!(v1.len(), 8 + 2 * (120 + 8) + 4);
+    for l in &mut layers {
+        l.rate = Source::Const(1.0);
+    }
+    assert_eq!(Layers::parse(&v1).unwrap().as_slice(), &layers[..]);
 }
 
 // ---------------------------------------------------------------------------
@@ -298,6 +327,7 @@ fn one<'m>(axes: &[Source], table: u8, root: Root, weight: Source, mask: &'m [u8
         root,
         fade_s: 0.0,
         weight,
+        rate: Source::Const(1.0),
         axes: a,
         axis_count: axes.len() as u8,
         mask,
@@ -517,11 +547,18 @@ fn trace_with(region: &[u8], frames: usize, dials: &[(usize, [f32; 6])]) -> Trac
 }
 
 fn walk_region(speed: Source, root: Root, weight: Source) -> Vec<u8> {
+    walk_region_at(1.0, speed, root, weight)
+}
+
+/// [`walk_region`] played at `rate`.
+fn walk_region_at(rate: f32, speed: Source, root: Root, weight: Source) -> Vec<u8> {
     let p = puppet();
     let segments = p.rig.segment_names().len();
     let mut mask = vec![255u8; segments];
     mask[0] = if root == Root::Apply { 255 } else { 0 };
-    let l = list(&[one(&[speed], 0, root, weight, &mask)], segments);
+    let mut walk = one(&[speed], 0, root, weight, &mask);
+    walk.rate = Source::Const(rate);
+    let l = list(&[walk], segments);
     region_of(&[
         Entry::rig(&p.rig_blob),
         Entry::table(&p.walk),
@@ -667,6 +704,67 @@ fn a_speed_ramp_adds_no_pop_and_keeps_joints_within_their_servo_speed() {
     // and several joints stay within their servos' speed.
     assert!(ramp.iter().all(|&r| r > 0.05), "{ramp:?}");
     assert!(ramp.iter().filter(|&&r| r <= 1.0).count() >= 3, "{ramp:?}");
+}
+
+#[test]
+fn at_a_rate_its_servos_can_follow_a_speed_ramp_stays_within_their_slew_limits() {
+    let p = puppet();
+    let (slow, fast) = walk_speeds();
+    let servos = p.rig.desc().servos.as_slice().to_vec();
+    let frames = 2000;
+    // The captured walk at constant speeds, at its own tempo: its largest
+    // step per joint as a fraction of the servo's speed limit.
+    let own = (0..=4)
+        .map(|k| {
+            let v = slow + (fast - slow) * k as f32 / 4.0;
+            let t = trace(
+                &walk_region(Source::Const(v), Root::Drop, Source::Const(1.0)),
+                frames,
+            );
+            worst_steps(&t, &servos).into_iter().fold(0.0f32, f32::max)
+        })
+        .fold(0.0f32, f32::max);
+    assert!(
+        own > 1.0,
+        "the captured walk is faster than humanoid16's servos: {own}"
+    );
+    // The tempo at which every joint's own motion uses 80 % of its servo's
+    // speed, then the speed ramped from the slowest walk to the fastest
+    // over 2 s: every step stays within the slew limits.
+    let rate = 0.8 / own;
+    let up = Source::Ramp {
+        from: slow,
+        to: fast,
+        seconds: 2.0,
+    };
+    let t = trace(
+        &walk_region_at(rate, up, Root::Drop, Source::Const(1.0)),
+        frames,
+    );
+    let ramp = worst_steps(&t, &servos);
+    for (s, r) in servos.iter().zip(&ramp) {
+        assert!(*r <= 1.0, "channel {}: {r} of its speed limit", s.channel);
+    }
+    // The walk moves every joint, some near their servo's speed.
+    assert!(ramp.iter().all(|&r| r > 0.01), "{ramp:?}");
+    assert!(ramp.iter().any(|&r| r > 0.3), "{ramp:?}");
+    // The phase advances at the rate: by rate · dt / duration per frame at
+    // a constant speed.
+    let table = Table::parse(&p.walk).unwrap();
+    let clips = Clips::new(table.grid().unwrap(), table.param_grid().unwrap(), 1).unwrap();
+    let d = clips.motion(&table, &[slow]).unwrap().duration();
+    let t = trace(
+        &walk_region_at(rate, Source::Const(slow), Root::Drop, Source::Const(1.0)),
+        500,
+    );
+    for (k, &(_, phase)) in t.layer0.iter().enumerate() {
+        let want = ((k + 1) as f64 * 1e-3 * f64::from(rate) / f64::from(d)).fract();
+        let err = (f64::from(phase) - want).abs();
+        assert!(
+            err.min(1.0 - err) < 2e-4,
+            "frame {k}: phase {phase} vs {want}"
+        );
+    }
 }
 
 #[test]

@@ -108,6 +108,9 @@
 //! offset = 0.0                   # (default 0; also the value until the address is heard)
 //! ```
 //!
+//! Optional `[[layer]]` tables perform several tables at once, blended by
+//! body part; see [`LayerSpec`] and [`region`] for their fields.
+//!
 //! A `[[live.sensor]]` name that is a Unity humanoid bone (`Hips`,
 //! `RightHand`, …; see `host/src/live.rs`) reads that bone; any other name
 //! reads the tracker of that serial. `Params` overrides parameters `0..k`
@@ -131,6 +134,9 @@ use marionette_core::servo::Calibration;
 use marionette_core::wire::List;
 use serde::Deserialize;
 use toml::Spanned;
+
+mod layer;
+pub use layer::{Given, LayerSpec, region};
 
 /// A rig-file error: where (file, 1-based line; 0 if unknown), which field,
 /// and what is wrong.
@@ -225,6 +231,9 @@ pub struct RigFile {
     pub retarget_maps: Vec<RetargetMap>,
     /// `marionette live`'s name map (`[live]`; empty without one).
     pub live: LiveMap,
+    /// The layers (`[[layer]]`, in blend order; empty: one table, no
+    /// layers). See [`layer`](self::region).
+    pub layers: Vec<LayerSpec>,
 }
 
 impl RigFile {
@@ -411,6 +420,8 @@ struct RawRig {
     goal: Vec<S<RawGoal>>,
     retarget: Option<S<RawRetarget>>,
     live: Option<S<RawLive>>,
+    #[serde(default)]
+    layer: Vec<S<layer::RawLayer>>,
 }
 
 #[derive(Deserialize)]
@@ -941,6 +952,7 @@ impl Builder<'_, '_> {
         let retarget = self.retarget(raw.retarget.as_ref())?;
         let retarget_maps = self.retarget_maps(raw.retarget.as_ref())?;
         let live = self.live(raw.live.as_ref())?;
+        let layers = layer::parse(self.src, &raw, &self.names)?;
         let rig = RigFile {
             file: self.src.file.to_string(),
             name: raw.name.get_ref().clone(),
@@ -949,6 +961,7 @@ impl Builder<'_, '_> {
             retarget,
             retarget_maps,
             live,
+            layers,
         };
         self.check(&rig.desc())?;
         Ok(rig)

@@ -323,7 +323,8 @@ impl LayerState {
 }
 
 /// One layer's pose at `params` into `out`: a grid query, or for a clip
-/// table the pose at the playhead after advancing it by `dt`. Returns what
+/// table the pose at the playhead after advancing it by `dt` (the frame's
+/// step times the layer's rate). Returns what
 /// the parameter query did, `None` if synthesis failed.
 fn layer_pose<const N: usize>(
     table: &Table<'_>,
@@ -871,7 +872,8 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
                 return false;
             };
             state.fade_to(target, layer.fade_s, dt);
-            let Some(adjust) = layer_pose(table, params, state, dt, &mut self.synth) else {
+            let step = dt * layer.rate_at(&self.params, time);
+            let Some(adjust) = layer_pose(table, params, state, step, &mut self.synth) else {
                 return false;
             };
             adjusted |= adjust != Adjust::None;

@@ -20,7 +20,11 @@
 //!   (weight 0 ↔ 1) takes exactly `fade_s`;
 //! - its **root** rule ([`Root`]): a looping clip's travel per cycle moves
 //!   the figure ([`Root::Apply`]) or is dropped for a puppet on a stand
-//!   ([`Root::Drop`]).
+//!   ([`Root::Drop`]);
+//! - its **rate** (format version 2): a [`Source`] too, the clip's playback
+//!   rate (1: the table's own durations; clamped to `[0, MAX_RATE]`), for a
+//!   puppet whose servos are slower than the captured motion; a static grid
+//!   ignores it.
 //!
 //! # Blend order and rule
 //!
@@ -45,7 +49,7 @@
 //! # Clips in time
 //!
 //! A clip layer keeps a [`Playhead`]. Each performed frame its phase
-//! advances by `dt / duration_k`, where `duration_k` is phase `k`'s duration
+//! advances by `rate · dt / duration_k`, where `duration_k` is phase `k`'s duration
 //! interpolated at the layer's current parameters ([`crate::clip::Motion`];
 //! W&H: "we also calculate an interpolated time duration"), and `dt` is the
 //! frame's step (the frame period at a steady tracker rate). The phase is
@@ -55,7 +59,7 @@
 //! differ between neighbouring parameters. A loop wraps; a one-shot motion
 //! stops at its end.
 //!
-//! # Layer list format, version 1 (all integers little-endian)
+//! # Layer list format, version 2 (all integers little-endian)
 //!
 //! | offset | size | field |
 //! |---|---|---|
@@ -66,14 +70,19 @@
 //! | 8 | `L · (LAYER_FIXED + align4(S))` | the layers, below |
 //! | end − 4 | 4 | CRC-32/ISO-HDLC of every byte before it |
 //!
-//! One layer: `table: u8` (index among the region's table entries), `root:
-//! u8` (0 drop, 1 apply), `axes: u8` (the table's parameter axis count),
-//! `reserved: u8` (0), `fade_s: f32` (finite, ≥ 0), the weight [`Source`],
-//! then [`MAX_AXES`] axis sources (the first `axes` used, the rest all
+//! One layer ([`LAYER_FIXED`] bytes, then the mask): `table: u8` (index
+//! among the region's table entries), `root: u8` (0 drop, 1 apply), `axes:
+//! u8` (the table's parameter axis count), `reserved: u8` (0), `fade_s: f32`
+//! (finite, ≥ 0), the weight [`Source`], the rate [`Source`], then
+//! [`MAX_AXES`] axis sources (the first `axes` used, the rest all
 //! zero), then `S` mask bytes, zero-padded to a multiple of 4. A source is
 //! 16 bytes: `kind: u8` (0 constant, 1 parameter, 2 ramp), `index: u8`
 //! (the parameter, `< MAX_PARAMS`), two zero bytes, then three `f32`
 //! (constant: value, 0, 0; parameter: 0, 0, 0; ramp: from, to, seconds > 0).
+//!
+//! Version 1 is version 2 without the rate source (each layer 16 bytes
+//! shorter; the rate is 1). It is still read; [`Layers::write`] writes
+//! version 2.
 
 use glam::{Quat, Vec3};
 
@@ -87,16 +96,18 @@ use crate::wire::StatusReason;
 
 /// The layer list's magic.
 pub const MAGIC: [u8; 4] = *b"MLAY";
-/// The layer list format version.
-pub const VERSION: u16 = 1;
+/// The layer list format version written ([`Layers::parse`] reads 1 too).
+pub const VERSION: u16 = 2;
 /// Most layers a region may carry.
 pub const MAX_LAYERS: usize = 3;
 /// Bytes before the layers.
 pub const PREFIX_LEN: usize = 8;
 /// Bytes of one source.
 pub const SOURCE_LEN: usize = 16;
-/// Bytes of one layer before its mask.
-pub const LAYER_FIXED: usize = 8 + SOURCE_LEN * (1 + MAX_AXES);
+/// Bytes of one layer before its mask (format version 2).
+pub const LAYER_FIXED: usize = 8 + SOURCE_LEN * (2 + MAX_AXES);
+/// The fastest playback rate (a [`Layer::rate`] above it is clamped).
+pub const MAX_RATE: f32 = 4.0;
 /// Bytes of the trailing CRC.
 pub const CRC_LEN: usize = 4;
 
@@ -155,6 +166,9 @@ pub struct Layer<'a> {
     pub fade_s: f32,
     /// The layer weight's source (clamped to `[0, 1]`).
     pub weight: Source,
+    /// A clip's playback rate's source (clamped to `[0, MAX_RATE]`; 1 in
+    /// format version 1).
+    pub rate: Source,
     /// The parameter sources, one per parameter axis of the table.
     pub axes: [Source; MAX_AXES],
     /// Parameter axes used.
@@ -168,6 +182,18 @@ impl Layer<'_> {
     #[must_use]
     pub fn sources(&self) -> &[Source] {
         self.axes.get(..usize::from(self.axis_count)).unwrap_or(&[])
+    }
+
+    /// The playback rate now (see [`Source::value`]), clamped to
+    /// `[0, MAX_RATE]`; 0 if the source is not a number.
+    #[must_use]
+    pub fn rate_at(&self, params: &[f32], t: f32) -> f32 {
+        let r = self.rate.value(params, t);
+        if r.is_finite() {
+            math::clamp(r, 0.0, MAX_RATE)
+        } else {
+            0.0
+        }
     }
 }
 
@@ -211,7 +237,12 @@ impl core::fmt::Display for LayerError {
         match self {
             Self::Truncated => f.write_str("layer list truncated or of the wrong length"),
             Self::Magic => f.write_str("layer list magic is not MLAY"),
-            Self::Version(v) => write!(f, "layer list version {v} (this core reads {VERSION})"),
+            Self::Version(v) => {
+                write!(
+                    f,
+                    "layer list version {v} (this core reads 1 ..= {VERSION})"
+                )
+            }
             Self::Crc => f.write_str("layer list CRC mismatch"),
             Self::Count => write!(f, "layer count not in 1..={MAX_LAYERS}"),
             Self::Field { index } => write!(f, "layer {index}: a field is out of its domain"),
@@ -234,20 +265,35 @@ const NO_LAYER: Layer<'static> = Layer {
     root: Root::Drop,
     fade_s: 0.0,
     weight: Source::Const(0.0),
+    rate: Source::Const(1.0),
     axes: [Source::Const(0.0); MAX_AXES],
     axis_count: 0,
     mask: &[],
 };
 
-/// Bytes of one layer with `segments` mask bytes.
-const fn layer_len(segments: usize) -> usize {
-    LAYER_FIXED + (segments.saturating_add(3) & !3)
+/// Bytes of one layer's fixed part in format `version` (1 or 2).
+const fn fixed_len(version: u16) -> usize {
+    if version == 1 {
+        LAYER_FIXED - SOURCE_LEN
+    } else {
+        LAYER_FIXED
+    }
 }
 
-/// Bytes of a layer list of `count` layers over `segments` segments.
+/// Bytes of one layer with `segments` mask bytes, in format `version`.
+const fn layer_len(version: u16, segments: usize) -> usize {
+    fixed_len(version) + (segments.saturating_add(3) & !3)
+}
+
+/// Bytes of a layer list of `count` layers over `segments` segments, as
+/// [`Layers::write`] writes it (format [`VERSION`]).
 #[must_use]
 pub const fn len(count: usize, segments: usize) -> usize {
-    PREFIX_LEN + count * layer_len(segments) + CRC_LEN
+    len_in(VERSION, count, segments)
+}
+
+const fn len_in(version: u16, count: usize, segments: usize) -> usize {
+    PREFIX_LEN + count * layer_len(version, segments) + CRC_LEN
 }
 
 fn f32_at(b: &[u8], at: usize) -> Option<f32> {
@@ -312,6 +358,7 @@ fn write_layer(l: &Layer<'_>, segments: usize, o: &mut [u8]) -> Option<()> {
     let (sources, mask) = rest.split_at_mut_checked(LAYER_FIXED - 8)?;
     let mut chunks = sources.chunks_exact_mut(SOURCE_LEN);
     write_source(&l.weight, chunks.next()?);
+    write_source(&l.rate, chunks.next()?);
     for (s, c) in l.sources().iter().zip(chunks) {
         write_source(s, c);
     }
@@ -319,7 +366,12 @@ fn write_layer(l: &Layer<'_>, segments: usize, o: &mut [u8]) -> Option<()> {
     Some(())
 }
 
-fn read_layer<'a>(b: &'a [u8], segments: usize, index: u8) -> Result<Layer<'a>, LayerError> {
+fn read_layer<'a>(
+    b: &'a [u8],
+    version: u16,
+    segments: usize,
+    index: u8,
+) -> Result<Layer<'a>, LayerError> {
     let bad = LayerError::Field { index };
     let Some(&[table, root, axes, reserved, f0, f1, f2, f3]) = b.first_chunk::<8>() else {
         return Err(LayerError::Truncated);
@@ -333,11 +385,17 @@ fn read_layer<'a>(b: &'a [u8], segments: usize, index: u8) -> Result<Layer<'a>, 
     if reserved != 0 || usize::from(axes) > MAX_AXES || !(fade_s.is_finite() && fade_s >= 0.0) {
         return Err(bad);
     }
+    let fixed = fixed_len(version);
     let mut sources = b
-        .get(8..LAYER_FIXED)
+        .get(8..fixed)
         .ok_or(LayerError::Truncated)?
         .chunks_exact(SOURCE_LEN);
     let weight = sources.next().and_then(read_source).ok_or(bad)?;
+    let rate = if version == 1 {
+        Source::Const(1.0)
+    } else {
+        sources.next().and_then(read_source).ok_or(bad)?
+    };
     let mut axis_sources = [Source::Const(0.0); MAX_AXES];
     for (k, (slot, raw)) in axis_sources.iter_mut().zip(sources).enumerate() {
         if k < usize::from(axes) {
@@ -347,9 +405,9 @@ fn read_layer<'a>(b: &'a [u8], segments: usize, index: u8) -> Result<Layer<'a>, 
         }
     }
     let mask = b
-        .get(LAYER_FIXED..LAYER_FIXED + segments)
+        .get(fixed..fixed + segments)
         .ok_or(LayerError::Truncated)?;
-    let pad = b.get(LAYER_FIXED + segments..layer_len(segments));
+    let pad = b.get(fixed + segments..layer_len(version, segments));
     if pad.is_none_or(|p| p.iter().any(|&x| x != 0)) {
         return Err(bad);
     }
@@ -358,6 +416,7 @@ fn read_layer<'a>(b: &'a [u8], segments: usize, index: u8) -> Result<Layer<'a>, 
         root,
         fade_s,
         weight,
+        rate,
         axes: axis_sources,
         axis_count: axes,
         mask,
@@ -375,11 +434,11 @@ impl<'a> Layers<'a> {
             return Err(LayerError::Magic);
         }
         let version = u16::from_le_bytes([v0, v1]);
-        if version != VERSION {
+        if !(1..=VERSION).contains(&version) {
             return Err(LayerError::Version(version));
         }
         let (count, segments) = (usize::from(count), usize::from(segments));
-        if bytes.len() != len(count, segments) {
+        if bytes.len() != len_in(version, count, segments) {
             return Err(LayerError::Truncated);
         }
         let (body, crc) = bytes.split_at(bytes.len() - CRC_LEN);
@@ -397,9 +456,9 @@ impl<'a> Layers<'a> {
         let chunks = body
             .get(PREFIX_LEN..)
             .unwrap_or(&[])
-            .chunks_exact(layer_len(segments));
+            .chunks_exact(layer_len(version, segments));
         for (i, (slot, raw)) in out.layers.iter_mut().zip(chunks).enumerate() {
-            *slot = read_layer(raw, segments, i as u8)?;
+            *slot = read_layer(raw, version, segments, i as u8)?;
         }
         Ok(out)
     }
@@ -425,7 +484,7 @@ impl<'a> Layers<'a> {
         prefix.copy_from_slice(&[m0, m1, m2, m3, v0, v1, count, seg]);
         for ((l, o), i) in layers
             .iter()
-            .zip(rest.chunks_exact_mut(layer_len(segments)))
+            .zip(rest.chunks_exact_mut(layer_len(VERSION, segments)))
             .zip(0u8..)
         {
             write_layer(l, segments, o).ok_or(LayerError::Field { index: i })?;

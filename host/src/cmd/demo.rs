@@ -184,16 +184,15 @@ fn mask(segments: &[String], owned: &[(&str, u8)]) -> Result<Vec<u8>, CmdError> 
 /// the walk clips (`walk_blob`), and the layer list: layer 0 the walk
 /// (speed ramping from the table's slowest to its fastest over
 /// `ramp_seconds`, root travel dropped, 0.25 s cross-fade), layer 1 the
-/// reach over it ([`DEMO_MASKS`]).
+/// reach over it ([`DEMO_MASKS`]). The same layers as a rig file's
+/// `[[layer]]` tables, laid out by [`rigfile::region`].
 pub fn layered_region(
     rig: &rigfile::RigFile,
     reach_blob: &[u8],
     walk_blob: &[u8],
     ramp_seconds: f32,
 ) -> Result<Vec<u8>, CmdError> {
-    use marionette_core::layer::{Layer, Layers, Root, Source};
-    use marionette_core::region::{self, Entry};
-    let rig_blob = rigfile::to_blob(rig)?;
+    use marionette_core::layer::{Root, Source};
     let walk = marionette_core::table::Table::parse(walk_blob)
         .map_err(|e| format!("the walk table: {e}"))?;
     let [speed] = walk.param_axes() else {
@@ -201,51 +200,39 @@ pub fn layered_region(
     };
     let fastest = speed.min + speed.step * f32::from(speed.count.saturating_sub(1));
     let segments = rig.segment_names();
-    let masks = [
-        mask(segments, DEMO_MASKS[0].1)?,
-        mask(segments, DEMO_MASKS[1].1)?,
-    ];
-    let none = [Source::Const(0.0); marionette_core::table::MAX_AXES];
-    let mut walk_axes = none;
-    walk_axes[0] = Source::Ramp {
+    let layer = |(name, owned): (&str, &[(&str, u8)]), table, params| {
+        Ok::<_, CmdError>(rigfile::LayerSpec {
+            name: name.into(),
+            line: 0,
+            table,
+            root: Root::Drop,
+            fade_s: 0.25,
+            weight: Source::Const(1.0),
+            rate: Source::Const(1.0),
+            params,
+            mask: mask(segments, owned)?,
+        })
+    };
+    let ramp = Source::Ramp {
         from: speed.min,
         to: fastest,
         seconds: ramp_seconds,
     };
-    let mut reach_axes = none;
-    reach_axes[..3].copy_from_slice(&[Source::Param(0), Source::Param(1), Source::Param(2)]);
-    let layers = [
-        Layer {
-            table: 1,
-            root: Root::Drop,
-            fade_s: 0.25,
-            weight: Source::Const(1.0),
-            axes: walk_axes,
-            axis_count: 1,
-            mask: &masks[0],
-        },
-        Layer {
-            table: 0,
-            root: Root::Drop,
-            fade_s: 0.25,
-            weight: Source::Const(1.0),
-            axes: reach_axes,
-            axis_count: 3,
-            mask: &masks[1],
-        },
+    let hand = (0..3).map(Source::Param).collect();
+    let mut layered = rig.clone();
+    layered.layers = vec![
+        layer(DEMO_MASKS[0], 1, vec![ramp])?,
+        layer(DEMO_MASKS[1], 0, hand)?,
     ];
-    let mut list = vec![0u8; marionette_core::layer::len(layers.len(), segments.len())];
-    Layers::write(&layers, segments.len(), &mut list).map_err(|e| e.to_string())?;
-    let entries = [
-        Entry::rig(&rig_blob),
-        Entry::table(reach_blob),
-        Entry::table(walk_blob),
-        Entry::layers(&list),
-    ];
-    let mut out = vec![0u8; region::len(&entries).map_err(|e| e.to_string())?];
-    let n = region::write(&entries, &mut out).map_err(|e| e.to_string())?;
-    out.truncate(n);
-    Ok(out)
+    let given = [
+        ("the reach table", reach_blob),
+        ("the walk table", walk_blob),
+    ]
+    .map(|(name, blob)| rigfile::Given {
+        name: name.into(),
+        blob,
+    });
+    Ok(rigfile::region(&layered, &given)?)
 }
 
 /// A path as given if it exists, else the file of that repository path

@@ -27,8 +27,9 @@ pub struct Args {
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The table blob (`marionette build`); without it the board does not arm.
+    /// Repeat it for a rig with `[[layer]]` tables: table 0, 1, … in order.
     #[arg(long)]
-    pub tables: Option<PathBuf>,
+    pub tables: Vec<PathBuf>,
     /// The tracker recording (CSV; docs/recording.md).
     #[arg(long)]
     pub recording: PathBuf,
@@ -210,12 +211,7 @@ pub fn save_take(
 
 /// Runs the performance and prints its summary.
 pub fn run(args: &Args) -> Result<(), CmdError> {
-    let inputs = sim::load_with(
-        &args.rig,
-        args.tables.as_deref(),
-        &args.recording,
-        args.frame,
-    )?;
+    let inputs = sim::load_with(&args.rig, &args.tables, &args.recording, args.frame)?;
     let pacing = if args.realtime {
         Pacing::RealTime
     } else {

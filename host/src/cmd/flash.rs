@@ -17,7 +17,7 @@ use super::CmdError;
 #[cfg(feature = "flash")]
 use crate::flash::Options;
 use crate::flash::{self, BLACKPILL, DEFAULT_CHIP, FlashError};
-use crate::{perform, rigfile};
+use crate::rigfile;
 #[cfg(feature = "flash")]
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use marionette_core::{region, table};
@@ -33,10 +33,11 @@ pub struct Args {
     pub elf: Option<PathBuf>,
     /// The table region (0x0804_0000, 256 KiB): a region image (rig +
     /// tables, `region.bin` of `demo` or `emulate`), or with `--rig` a table
-    /// blob from `marionette build`.
+    /// blob from `marionette build` (repeat it for a rig with `[[layer]]`
+    /// tables: table 0, 1, … in order).
     #[arg(long)]
-    pub tables: Option<PathBuf>,
-    /// Rig file: the region is made of this rig and the `--tables` blob.
+    pub tables: Vec<PathBuf>,
+    /// Rig file: the region is made of this rig and the `--tables` blobs.
     #[arg(long)]
     pub rig: Option<PathBuf>,
     /// probe-rs chip name.
@@ -61,31 +62,45 @@ fn read(path: &Path) -> Result<Vec<u8>, CmdError> {
 }
 
 /// The table region image to flash: the file as given, or (with `--rig`)
-/// the rig and the table blob laid out by the core.
+/// the rig and the table blobs laid out by the core.
 fn region_image(args: &Args) -> Result<Option<Vec<u8>>, CmdError> {
-    let tables = args.tables.as_deref().map(read).transpose()?;
+    let blobs = args
+        .tables
+        .iter()
+        .map(|p| read(p))
+        .collect::<Result<Vec<_>, _>>()?;
     let Some(rig_path) = &args.rig else {
-        return Ok(tables);
+        return match &blobs[..] {
+            [] => Ok(None),
+            [one] => Ok(Some(one.clone())),
+            _ => Err(
+                "without --rig, --tables takes one region image (give --rig to lay \
+                      out several table blobs)"
+                    .into(),
+            ),
+        };
     };
     let rig = rigfile::load(rig_path).map_err(|e| e.to_string())?;
-    let rig_blob = rigfile::to_blob(&rig).map_err(|e| e.to_string())?;
-    if let Some(t) = &tables
-        && t.get(..4) != Some(&table::MAGIC[..])
-    {
-        return Err(format!(
-            "{}: with --rig, --tables takes a table blob of `marionette build` (this is {})",
-            args.tables
-                .as_deref()
-                .map_or_else(String::new, |p| p.display().to_string()),
-            if region::directory(t).is_ok() {
-                "already a region"
-            } else {
-                "not a table blob"
-            }
-        )
-        .into());
+    let mut given = Vec::new();
+    for (p, t) in args.tables.iter().zip(&blobs) {
+        if t.get(..4) != Some(&table::MAGIC[..]) {
+            return Err(format!(
+                "{}: with --rig, --tables takes a table blob of `marionette build` (this is {})",
+                p.display(),
+                if region::directory(t).is_ok() {
+                    "already a region"
+                } else {
+                    "not a table blob"
+                }
+            )
+            .into());
+        }
+        given.push(rigfile::Given {
+            name: p.display().to_string(),
+            blob: t,
+        });
     }
-    Ok(Some(perform::region(&rig_blob, tables.as_deref())))
+    Ok(Some(rigfile::region(&rig, &given)?))
 }
 
 /// Plans, checks, and (unless `--dry-run`) writes.

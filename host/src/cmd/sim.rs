@@ -21,8 +21,9 @@ pub struct Args {
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The table blob (`marionette build`); without it the rig does not arm.
+    /// Repeat it for a rig with `[[layer]]` tables: table 0, 1, … in order.
     #[arg(long)]
-    pub tables: Option<PathBuf>,
+    pub tables: Vec<PathBuf>,
     /// The tracker recording (CSV; docs/recording.md).
     #[arg(long)]
     pub recording: PathBuf,
@@ -92,33 +93,40 @@ impl Inputs {
 
 /// Loads the rig, tables and recording into a region image and a session
 /// (compact frames).
-pub fn load(rig: &Path, tables: Option<&Path>, recording: &Path) -> Result<Inputs, CmdError> {
+pub fn load(rig: &Path, tables: &[PathBuf], recording: &Path) -> Result<Inputs, CmdError> {
     load_with(rig, tables, recording, Framing::Compact)
 }
 
 /// [`load`] with the tracker frames framed as `framing` says.
 pub fn load_with(
     rig: &Path,
-    tables: Option<&Path>,
+    tables: &[PathBuf],
     recording: &Path,
     framing: Framing,
 ) -> Result<Inputs, CmdError> {
     let rig_path = rigfile::resolve(rig);
     let rig = rigfile::load(&rig_path)?;
-    let rig_blob = rigfile::to_blob(&rig)?;
     let mut sources = vec![
         ("the rig", rig_path),
         ("the recording", recording.to_path_buf()),
     ];
-    sources.extend(tables.map(|t| ("the table", t.to_path_buf())));
-    let table_blob = match tables {
-        Some(t) => Some(std::fs::read(t).map_err(|e| format!("{}: {e}", t.display()))?),
-        None => None,
-    };
+    sources.extend(tables.iter().map(|t| ("the table", t.clone())));
+    let blobs = tables
+        .iter()
+        .map(|t| std::fs::read(t).map_err(|e| format!("{}: {e}", t.display())))
+        .collect::<Result<Vec<_>, _>>()?;
+    let given: Vec<_> = tables
+        .iter()
+        .zip(&blobs)
+        .map(|(t, blob)| rigfile::Given {
+            name: t.display().to_string(),
+            blob,
+        })
+        .collect();
     let samples = import::csv::read_tracker_csv(recording)?;
     let frames = perform::frames(&samples)?;
     Ok(Inputs {
-        region: perform::region(&rig_blob, table_blob.as_deref()),
+        region: rigfile::region(&rig, &given)?,
         session: perform::session_with(&frames, framing)?,
         frames: frames.len(),
         times: frames.iter().map(|f| f.time_us).collect(),
@@ -201,12 +209,7 @@ pub fn out_file(out: &Path, name: &str) -> Result<PathBuf, CmdError> {
 /// Runs the session natively and writes the servo curves.
 pub fn run(args: &Args) -> Result<(), CmdError> {
     let csv = out_file(&args.out, "servo_sim.csv")?;
-    let inputs = load_with(
-        &args.rig,
-        args.tables.as_deref(),
-        &args.recording,
-        args.frame,
-    )?;
+    let inputs = load_with(&args.rig, &args.tables, &args.recording, args.frame)?;
     let run = perform::simulate(&inputs.region, &inputs.session)?;
     let stop = refusal::check(NATIVE, &run.replies, &inputs.region, None);
     if stop.is_none() {
