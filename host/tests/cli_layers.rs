@@ -253,3 +253,47 @@ fn layer_errors_name_the_file_line_and_field() {
         "2 tables given; a rig without [[layer]] tables performs one",
     );
 }
+
+#[test]
+fn flash_lays_out_the_layered_region_and_the_board_would_arm_with_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let (layered, _) = rig_with(dir.path(), "layered.toml", LAYERS);
+    let [rest, walk] = tables(dir.path());
+    let o = marionette(&[
+        "flash",
+        "--dry-run",
+        "--rig",
+        s(&layered),
+        "--tables",
+        s(&rest),
+        "--tables",
+        s(&walk),
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        out.contains("(4 entries)") && out.contains("2 layers"),
+        "{out}"
+    );
+    assert!(out.contains("the board arms"), "{out}");
+    // Without --rig several blobs cannot be laid out.
+    let o = marionette(&[
+        "flash",
+        "--dry-run",
+        "--tables",
+        s(&rest),
+        "--tables",
+        s(&walk),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr)
+            .contains("without --rig, --tables takes one region image"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
