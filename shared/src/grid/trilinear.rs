@@ -81,11 +81,6 @@ impl Trilinear {
         wide: bool,
     ) -> Result<(), GridError> {
         if wide {
-            let rows = self.index.map(|i| samples.row(i as usize));
-            if self.slerp.iter().all(SlerpWeight::is_blend) && rows.iter().all(Option::is_some) {
-                let rows = rows.map(|r| r.unwrap_or((&[], &[])));
-                return self.pose_rows_wide(&rows, positions, rotations);
-            }
             self.pose_wide(samples, positions, rotations)
         } else {
             self.pose_each(samples, positions, rotations)
@@ -181,68 +176,6 @@ impl Trilinear {
         let cd = y.blend(c, x.blend(q6, q7));
         let [rx, ry, rz, rw] = math::renormalize_lanes(z.blend(ab, cd));
         Ok((p, Quat::from_xyzw(rx, ry, rz, rw)))
-    }
-
-    /// The host path from in-memory rows when every level blends (a query
-    /// inside a cell, the usual case): four segments at a time as [`F4`]
-    /// lanes, each window sample's four rotations read straight from its row
-    /// and transposed in registers, the tree in the order of
-    /// [`Trilinear::segment_blend_by`], the positions as twelve floats per
-    /// window sample (in window order, as [`Trilinear::fetch`]); the last
-    /// segments (fewer than four) one at a time. The same operations per
-    /// segment as every other path, so the same bits.
-    #[inline(never)]
-    fn pose_rows_wide(
-        &self,
-        rows: &[(&[Vec3], &[Quat]); 8],
-        positions: &mut [Vec3],
-        rotations: &mut [Quat],
-    ) -> Result<(), GridError> {
-        let [x, y, z] = self.slerp.each_ref().map(SlerpWeight::lanes::<F4>);
-        let weights = self.weight.map(F4::splat);
-        let quads = positions
-            .chunks_exact_mut(4)
-            .zip(rotations.chunks_exact_mut(4))
-            .enumerate();
-        for (k, (p, r)) in quads {
-            let at = k * 4;
-            let read = |j: usize| {
-                let (ps, qs) = rows.get(j)?;
-                let ps = ps.get(at..)?.first_chunk::<4>()?;
-                let qs = qs.get(at..)?.first_chunk::<4>()?;
-                Some((flatten(ps), transpose4(qs)))
-            };
-            let get = |j: usize| read(j).ok_or(GridError::MissingSample);
-            let w = |j: usize| weights.get(j).copied().unwrap_or(F4::splat(0.0));
-            let weigh = |s: [F4; 3], j: usize| s.map(|v| v * w(j));
-            let add = |a: [F4; 3], b: [F4; 3]| [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
-            let ((p0, q0), (p1, q1)) = (get(0)?, get(1)?);
-            let mut sum = add(weigh(p0, 0), weigh(p1, 1));
-            let a = x.blend_lanes(q0, q1);
-            let ((p2, q2), (p3, q3)) = (get(2)?, get(3)?);
-            sum = add(add(sum, weigh(p2, 2)), weigh(p3, 3));
-            let ab = y.blend_lanes(a, x.blend_lanes(q2, q3));
-            let ((p4, q4), (p5, q5)) = (get(4)?, get(5)?);
-            sum = add(add(sum, weigh(p4, 4)), weigh(p5, 5));
-            let c = x.blend_lanes(q4, q5);
-            let ((p6, q6), (p7, q7)) = (get(6)?, get(7)?);
-            sum = add(add(sum, weigh(p6, 6)), weigh(p7, 7));
-            let cd = y.blend_lanes(c, x.blend_lanes(q6, q7));
-            let q = math::renormalize_lanes(z.blend_lanes(ab, cd));
-            if let (Some(p), Some(r)) = (p.first_chunk_mut::<4>(), r.first_chunk_mut::<4>()) {
-                *p = unflatten(sum);
-                *r = untranspose4(q);
-            }
-        }
-        let done = positions.len() / 4 * 4;
-        let rest = positions.iter_mut().zip(rotations.iter_mut()).enumerate();
-        for (seg, (p, r)) in rest.skip(done) {
-            (*p, *r) = self.segment_blend_by(|j| {
-                let (ps, qs) = rows.get(j)?;
-                Some((*ps.get(seg)?, *qs.get(seg)?))
-            })?;
-        }
-        Ok(())
     }
 
     /// The host path: blocks of `MAX_WINDOW / 8` segments, the same
@@ -349,49 +282,4 @@ impl Trilinear {
             r
         }
     }
-}
-
-/// Four positions as twelve floats in three lanes.
-#[inline(always)]
-fn flatten(v: &[Vec3; 4]) -> [F4; 3] {
-    let [a, b, c, d] = *v;
-    [
-        F4([a.x, a.y, a.z, b.x]),
-        F4([b.y, b.z, c.x, c.y]),
-        F4([c.z, d.x, d.y, d.z]),
-    ]
-}
-
-/// [`flatten`] undone.
-#[inline(always)]
-fn unflatten([x0, x1, x2]: [F4; 3]) -> [Vec3; 4] {
-    let ([a0, a1, a2, b0], [b1, b2, c0, c1], [c2, d0, d1, d2]) = (x0.0, x1.0, x2.0);
-    [
-        Vec3::new(a0, a1, a2),
-        Vec3::new(b0, b1, b2),
-        Vec3::new(c0, c1, c2),
-        Vec3::new(d0, d1, d2),
-    ]
-}
-
-/// Four rotations as `[x, y, z, w]` lanes.
-#[inline(always)]
-fn transpose4(q: &[Quat; 4]) -> [F4; 4] {
-    let [a, b, c, d] = *q;
-    [
-        F4([a.x, b.x, c.x, d.x]),
-        F4([a.y, b.y, c.y, d.y]),
-        F4([a.z, b.z, c.z, d.z]),
-        F4([a.w, b.w, c.w, d.w]),
-    ]
-}
-
-/// [`transpose4`] undone.
-#[inline(always)]
-fn untranspose4([x, y, z, w]: [F4; 4]) -> [Quat; 4] {
-    let quat = |i: usize| {
-        let at = |v: &F4| v.0.get(i).copied().unwrap_or(0.0);
-        Quat::from_xyzw(at(&x), at(&y), at(&z), at(&w))
-    };
-    [quat(0), quat(1), quat(2), quat(3)]
 }
