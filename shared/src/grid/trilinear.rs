@@ -248,7 +248,10 @@ impl Trilinear {
         segment: usize,
     ) -> Result<(Vec3, [[f32; 4]; 8]), GridError> {
         let mut q = [[0.0; 4]; 8];
-        let mut p = Vec3::ZERO;
+        // From −0, the additive identity of every float (−0 + +0 is +0,
+        // −0 + −0 is −0): the sum is `s₀·w₀ + s₁·w₁ + …` bit for bit,
+        // without a special first term.
+        let mut p = Vec3::splat(-0.0);
         // A counted loop rather than zipped iterators: at opt-level "s" the
         // loop is not unrolled, and the iterators cost more than the reads.
         let mut j = 0;
@@ -258,7 +261,7 @@ impl Trilinear {
             let (sp, sq) = samples
                 .sample(index as usize, segment)
                 .ok_or(GridError::MissingSample)?;
-            p = if j == 0 { sp * w } else { p + sp * w };
+            p += sp * w;
             *slot = [sq.x, sq.y, sq.z, sq.w];
             j += 1;
         }

@@ -210,19 +210,25 @@ fn rotation_from_words(lo: u32, hi: u32) -> Quat {
     let small = a * a + b * b + c * c;
     let rest = 1.0 - small;
     // One unsigned compare for `f32::MIN_POSITIVE ≤ rest < 1` (both
-    // constants are Thumb-2 immediates); `rest = 1` is exact below.
+    // constants are Thumb-2 immediates).
     let fast = rest.to_bits().wrapping_sub(f32::MIN_POSITIVE.to_bits())
         < 1.0f32.to_bits() - f32::MIN_POSITIVE.to_bits();
-    if !fast {
+    let (big, f) = if fast {
+        // `rest · rsqrt(rest)` (≤ 2 ulp) instead of the correctly rounded
+        // `math::sqrt`, whose `f64` rounding check is soft-float on the M4F;
+        // the renormalization absorbs the difference.
+        let big = rest * math::rsqrt_normal(rest);
+        // `|q|² = |s|² + big²` is 1 to a few ulp here, so one Newton step of
+        // `rsqrt` from 1, `(3 − |q|²)/2`, renormalizes to ~1e-13.
+        (big, 1.5 - 0.5 * (small + big * big))
+    } else if rest >= 1.0 {
+        // `small` rounds away (an axis-aligned rotation, such as a rest
+        // pose's identity): the dropped component is 1 and the stored ones
+        // are kept as they are (`× 1` is exact), without normalization.
+        (1.0, 1.0)
+    } else {
         return rotation_edge(lo & 3, [a, b, c], rest);
-    }
-    // `rest · rsqrt(rest)` (≤ 2 ulp) instead of the correctly rounded
-    // `math::sqrt`, whose `f64` rounding check is soft-float on the M4F; the
-    // renormalization absorbs the difference.
-    let big = rest * math::rsqrt_normal(rest);
-    // `|q|² = |s|² + big²` is 1 to a few ulp here, so one Newton step of
-    // `rsqrt` from 1, `(3 − |q|²)/2`, renormalizes to ~1e-13.
-    let f = 1.5 - 0.5 * (small + big * big);
+    };
     place(lo & 3, big * f, [a * f, b * f, c * f])
 }
 
@@ -239,13 +245,10 @@ fn place(index: u32, big: f32, [a, b, c]: [f32; 3]) -> Quat {
     Quat::from_xyzw(x, y, z, w)
 }
 
-/// The codes off the fast path: `rest = 1` (axis-aligned, exact) and codes
-/// no writer produces (`rest < f32::MIN_POSITIVE`, fully normalized).
+/// The codes no writer produces (`rest < f32::MIN_POSITIVE`), fully
+/// normalized.
 #[cold]
 fn rotation_edge(index: u32, s: [f32; 3], rest: f32) -> Quat {
-    if rest >= 1.0 {
-        return place(index, 1.0, s);
-    }
     let big = if rest > 0.0 {
         rest * math::rsqrt(rest)
     } else {
@@ -397,6 +400,53 @@ mod tests {
             let q = dequantize_rotation(&[b0, b1, b2, b3, b4, b5]);
             let n = math::quat_dot(q, q);
             assert!((n - 1.0).abs() < 1e-6, "{x:x} {q:?}");
+        }
+    }
+
+    /// The decoder as it was before axis-aligned codes (`rest = 1`) took
+    /// the inline path: the change must give the same bits.
+    fn previous_rotation_from_words(lo: u32, hi: u32) -> Quat {
+        let a = decode_component(lo >> 2);
+        let b = decode_component(lo >> 17);
+        let c = decode_component(hi);
+        let small = a * a + b * b + c * c;
+        let rest = 1.0 - small;
+        if !(f32::MIN_POSITIVE..1.0).contains(&rest) {
+            if rest >= 1.0 {
+                return place(lo & 3, 1.0, [a, b, c]);
+            }
+            return rotation_edge(lo & 3, [a, b, c], rest);
+        }
+        let big = rest * math::rsqrt_normal(rest);
+        let f = 1.5 - 0.5 * (small + big * big);
+        place(lo & 3, big * f, [a * f, b * f, c * f])
+    }
+
+    #[test]
+    fn decode_matches_the_previous_formula() {
+        let bits = |q: Quat| [q.x, q.y, q.z, q.w].map(f32::to_bits);
+        let check = |lo: u32, hi: u32| {
+            let new = rotation_from_words(lo, hi & 0x7FFF);
+            let old = previous_rotation_from_words(lo, hi & 0x7FFF);
+            assert_eq!(bits(new), bits(old), "{hi:x}{lo:08x}");
+        };
+        // Every code whose stored components are all within 2 steps of 0
+        // (where `rest` rounds to 1), for each dropped index.
+        let near = |k: i32| (ROT_MID + k) as u32;
+        for i in 0..4 {
+            for (a, b, c) in
+                (-2..=2).flat_map(|a| (-2..=2).flat_map(move |b| (-2..=2).map(move |c| (a, b, c))))
+            {
+                check(i | near(a) << 2 | near(b) << 17, near(c));
+            }
+        }
+        // And a sample of every pattern.
+        let mut x: u64 = 0x2545_F491_4F6C_DD1D;
+        for _ in 0..1_000_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            check(x as u32, (x >> 32) as u32);
         }
     }
 
