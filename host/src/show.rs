@@ -3,10 +3,11 @@
 //! straight lines within a stated error bound (the format and the decoder
 //! are the core's [`marionette_core::show`]).
 //!
-//! 1. **Frames.** Each take's outputs (frame-driven and easing) are sampled
-//!    at the rig's frame period from its first output to its last, each
-//!    frame taking the newest output at or before its time (what the servo
-//!    link holds). Takes follow one another.
+//! 1. **Frames.** Each take's outputs (frame-driven and easing; in a take
+//!    from a port, the targets its telemetry reported, every tenth frame:
+//!    [`Take::curves`]) are sampled at the rig's frame period from its
+//!    first output to its last, each frame taking the newest output at or
+//!    before its time (what the servo link holds). Takes follow one another.
 //! 2. **Keys.** Per channel the rig drives, greedily: from a key at frame
 //!    `s`, the next key is the furthest frame `e` (at most [`MAX_SPAN`]
 //!    frames on) such that every frame between decodes, through the core's
@@ -96,7 +97,7 @@ pub fn frames(takes: &[Take]) -> Result<(Vec<Vec<u16>>, u32), ShowBuildError> {
         if take.region != first.region {
             return Err(ShowBuildError::Region { index });
         }
-        let outputs = take.outputs();
+        let outputs = take.curves();
         let (Some(start), Some(end)) = (outputs.first(), outputs.last()) else {
             return Err(ShowBuildError::Empty(format!(
                 "take {index} has no outputs"
@@ -112,7 +113,7 @@ pub fn frames(takes: &[Take]) -> Result<(Vec<Vec<u16>>, u32), ShowBuildError> {
             {
                 k += 1;
             }
-            out.push(outputs.get(k).map(|o| o.2.clone()).unwrap_or_default());
+            out.push(outputs.get(k).map(|o| o.1.clone()).unwrap_or_default());
             t = match t.checked_add(period) {
                 Some(next) => next,
                 None => break,
