@@ -434,10 +434,12 @@ fn a_damaged_show_is_refused_with_a_counted_reason_and_nothing_moves() {
     flipped[blob.len() / 2] ^= 0x08;
     let mut other_rig = blob.clone();
     other_rig[8] ^= 1; // the rig hash
+    // Cut short: within its header, or after it (its CRC then fails).
     let cases = [
         (flipped, ShowState::BadCrc),
         (recrc(other_rig), ShowState::RigMismatch),
-        (blob[..blob.len() - 10].to_vec(), ShowState::Truncated),
+        (blob[..20].to_vec(), ShowState::Truncated),
+        (blob[..blob.len() - 10].to_vec(), ShowState::BadCrc),
     ];
     let status = |replies: &[u8]| {
         perform::decode_replies(replies)
