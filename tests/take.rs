@@ -333,7 +333,11 @@ fn a_take_from_a_serial_port_holds_the_telemetrys_targets_and_replays() {
     // The shipped rig with a 60 s fail-safe (a loaded machine must not
     // trip it), as a rig file: the take's region is made from it.
     let text = std::fs::read_to_string(repo().join("rigs/humanoid16.toml")).unwrap();
-    let patient = text.replacen("failsafe_timeout_ms = 100 ", "failsafe_timeout_ms = 60000 ", 1);
+    let patient = text.replacen(
+        "failsafe_timeout_ms = 100 ",
+        "failsafe_timeout_ms = 60000 ",
+        1,
+    );
     assert_ne!(patient, text);
     let rig_path = dir.path().join("rig.toml");
     std::fs::write(&rig_path, patient).unwrap();
@@ -399,7 +403,10 @@ fn a_take_from_a_serial_port_holds_the_telemetrys_targets_and_replays() {
     assert_eq!(csv.lines().count(), 1 + info.reported_outputs);
     let (_, report) =
         marionette_host::show::build(std::slice::from_ref(&take), 4, false, true).unwrap();
-    assert!(report.frames > 0 && report.worst_quarter_us <= 4, "{report:?}");
+    assert!(
+        report.frames > 0 && report.worst_quarter_us <= 4,
+        "{report:?}"
+    );
     let replayed = replay::emulated(&take, Pacing::AsFastAsPossible, 1.0).unwrap();
     assert_eq!(replayed.compares, "telemetry", "{replayed:?}");
     assert_eq!(replayed.mismatches, None);
@@ -519,7 +526,9 @@ fn a_damaged_show_is_refused_with_a_counted_reason_and_nothing_moves() {
                     },
                 ),
             };
-            let err = marionette_host::cmd::show::run(&args).unwrap_err().to_string();
+            let err = marionette_host::cmd::show::run(&args)
+                .unwrap_err()
+                .to_string();
             assert!(
                 err.contains("refused its flashed show (BadCrc")
                     && err.contains("counted 2 time(s)")

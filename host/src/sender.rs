@@ -214,7 +214,13 @@ enum Next {
 
 /// The writer thread: waits for the link to be free and something to send,
 /// sends it, records it.
-fn write_loop<W: Write>(mut port: W, link: Link, framing: Framing, shared: &Shared, start: Instant) {
+fn write_loop<W: Write>(
+    mut port: W,
+    link: Link,
+    framing: Framing,
+    shared: &Shared,
+    start: Instant,
+) {
     let mut seq = 0u32;
     let mut free_at = Instant::now();
     loop {

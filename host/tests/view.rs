@@ -208,7 +208,8 @@ fn shot_with_figure(url: &str, path: &Path, tries: usize) -> (Vec<[u8; 3]>, usiz
 /// if set, named `{name}_a.png`, `{name}_b.png`): the page must have
 /// drawn the figure in both, and the figure must have moved.
 fn check_page(url: &str, dir: &Path, name: &str) {
-    let shots = std::env::var_os("MARIONETTE_VIEW_SHOTS").map_or_else(|| dir.to_path_buf(), PathBuf::from);
+    let shots =
+        std::env::var_os("MARIONETTE_VIEW_SHOTS").map_or_else(|| dir.to_path_buf(), PathBuf::from);
     let start = Instant::now();
     let (a, width, drawn_a) = shot_with_figure(url, &shots.join(format!("{name}_a.png")), 3);
     std::thread::sleep(Duration::from_secs(1));
@@ -410,7 +411,10 @@ fn live_view_shows_a_vmc_performance_moving() {
         }
     };
     assert_ne!(to.port(), 0);
-    assert!(!url.contains(&format!(":{}", to.port())), "one address each");
+    assert!(
+        !url.contains(&format!(":{}", to.port())),
+        "one address each"
+    );
     let sending = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
     let keep = std::sync::Arc::clone(&sending);
     let vmc = std::thread::spawn(move || {

@@ -369,21 +369,20 @@ pub fn live(
     let title = format!("{}: live from udp://{listen}", rig.name());
     let view = super::view::ViewArgs::from(&args.view);
     let rig_blob = rigfile::to_blob(&rig)?;
-    let (offered, seconds) =
-        super::view::watched_board(&view, &rig_blob, &title, &[], |hook| {
-            listen_loop(
-                args,
-                (listener, stop),
-                (&mut senders, &mut source),
-                &sender,
-                &mut recording,
-                &|offered, newest| {
-                    hook(offered, sender.counts().dropped, newest, &|| {
-                        replies.recent(4096)
-                    });
-                },
-            )
-        })?;
+    let (offered, seconds) = super::view::watched_board(&view, &rig_blob, &title, &[], |hook| {
+        listen_loop(
+            args,
+            (listener, stop),
+            (&mut senders, &mut source),
+            &sender,
+            &mut recording,
+            &|offered, newest| {
+                hook(offered, sender.counts().dropped, newest, &|| {
+                    replies.recent(4096)
+                });
+            },
+        )
+    })?;
     sender.drain(Duration::from_secs(2));
     sender.command(CommandKind::Disarm);
     let failed = sender.failed();

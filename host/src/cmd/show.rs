@@ -128,7 +128,10 @@ fn play(args: &PlayArgs) -> Result<(), CmdError> {
         });
     }
     let show = crate::refusal::ShowReport::of(&replies.finish());
-    if let Some(line) = show.as_ref().and_then(crate::refusal::ShowReport::refusal_line) {
+    if let Some(line) = show
+        .as_ref()
+        .and_then(crate::refusal::ShowReport::refusal_line)
+    {
         return Err(format!("{name}: {line}").into());
     }
     match ack {

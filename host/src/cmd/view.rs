@@ -48,8 +48,7 @@ fn linger(args: &ViewArgs) -> std::time::Duration {
 /// far, frames dropped, the newest frame offered when the frames are not
 /// known in advance (`live`), and a way to read its recent replies (called
 /// only when a snapshot is due).
-pub type BoardHook<'h> =
-    &'h dyn Fn(usize, u64, Option<&TrackerFrame>, &dyn Fn() -> Vec<Message>);
+pub type BoardHook<'h> = &'h dyn Fn(usize, u64, Option<&TrackerFrame>, &dyn Fn() -> Vec<Message>);
 
 /// Runs `session` (a performance on a real board, `stream` or `live`, of
 /// the rig `rig_blob`) under the live view when `--view` asks for it.

@@ -286,8 +286,8 @@ pub use error::{ErrorCounters, WireError};
 pub use list::List;
 pub use message::{
     Ack, Command, CommandKind, Direction, FrameTiming, Hello, MAX_GOALS, MAX_PARAMS, MAX_SENSORS,
-    MAX_SERVOS, Message, Params, STAGES, Sensor, ShowState, State, Status, StatusReason,
-    Telemetry, TrackerFrame, Trip,
+    MAX_SERVOS, Message, Params, STAGES, Sensor, ShowState, State, Status, StatusReason, Telemetry,
+    TrackerFrame, Trip,
 };
 pub use reader::FrameReader;
 pub use receiver::{Incoming, Receiver, Session};
