@@ -371,19 +371,32 @@ fn vmc_hand(t: f64) -> Vec<u8> {
     .unwrap()
 }
 
-/// `live --view` (its view on `--view-listen`; `--listen` is the UDP
-/// source's) on the emulated board, driven by a VMC sender moving the
-/// right hand in a circle: the page draws the figure and it moves.
+/// `live --port PTY --view --take T` (its view on `--view-listen`;
+/// `--listen` is the UDP source's) to the emulated board on a
+/// pseudo-terminal, as a board on a serial port, driven by a VMC sender
+/// moving the right hand in a circle: the page draws the figure and it
+/// moves, and the take holds what the board's telemetry reported.
 #[test]
 fn live_view_shows_a_vmc_performance_moving() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
-    let (_, tables) = board_region(dir.path());
+    let (region, tables) = board_region(dir.path());
+    let elf = marionette_host::qemu::firmware_elf("perform").unwrap();
+    let mut board =
+        marionette_host::qemu::PtyBoard::start(&elf, &region, &dir.path().join("uart1.bin"))
+            .unwrap();
     let out = dir.path().join("out");
+    let take_path = dir.path().join("live.take");
     let (tx, lines) = std::sync::mpsc::channel();
     let (live, url) = start_view(
         &[
             "live",
+            "--port",
+            s(board.pty()),
+            "--baud",
+            "200000",
+            "--take",
+            s(&take_path),
             "--tables",
             s(&tables),
             "--listen",
@@ -431,4 +444,13 @@ fn live_view_shows_a_vmc_performance_moving() {
     sending.store(false, std::sync::atomic::Ordering::Relaxed);
     vmc.join().unwrap();
     assert!(status.success(), "live ends cleanly: {status}");
+    assert_eq!(board.wait(Duration::from_secs(30)).unwrap(), Some(0));
+    // The take from the port: the frames sent, the telemetry's targets.
+    let take = marionette_host::take::Take::load(&take_path).unwrap();
+    let info = take.info();
+    assert_eq!((take.source.as_str(), info.format_version), ("live", 2));
+    assert!(!info.servo_link_seen && info.frame_outputs == 0);
+    assert!(info.sent.tracker_frames > 100, "{info:?}");
+    assert_eq!(info.reported_outputs, info.telemetry);
+    assert!(info.reported_outputs > 10, "{info:?}");
 }
