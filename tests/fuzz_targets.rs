@@ -1148,6 +1148,8 @@ fn wire_seeds(out: &mut Vec<(&'static str, String, Vec<u8>)>) {
             request_seq: Some(4),
             state: State::Armed,
             trips: 1,
+            show: marionette_core::wire::ShowState::Ready,
+            show_refusals: 0,
         }),
         Message::Telemetry(Telemetry {
             seq: 5,

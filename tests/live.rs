@@ -106,6 +106,7 @@ fn vmc_over_udp_drives_the_emulated_board_as_sim_on_the_recorded_session() {
         out: dir.path().join("out"),
         take: Some(dir.path().join("live.take")),
         json: true,
+        view: Default::default(),
     };
     let listener = Listener::bind(args.listen).unwrap();
     let to = listener.local_addr().unwrap();

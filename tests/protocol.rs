@@ -125,11 +125,13 @@ fn a_matching_hello_recovers_from_a_protocol_mismatch() {
 /// A version-1 host's `Hello` is accepted: version 2 only appended fields
 /// and a message, so every version-1 host message is valid version 2; and
 /// version 3 only appended a command kind, so version-2 hosts are accepted
-/// too; version 4 likewise (the `Show` command), so version-3 hosts are.
+/// too; version 4 likewise (the `Show` command), so version-3 hosts are;
+/// version 5 only appended fields to the board's `Status`, so version-4
+/// hosts are.
 #[test]
 fn a_version_1_hello_is_accepted() {
     let mut rx: Receiver = Receiver::new();
-    for v in [1, 2, 3, 4] {
+    for v in [1, 2, 3, 4, 5] {
         let got = feed(&mut rx, &hello(v));
         assert!(
             matches!(got[..], [Incoming::Hello { host_version, accepted: true }] if host_version == v),
@@ -137,7 +139,7 @@ fn a_version_1_hello_is_accepted() {
         );
     }
     assert!(matches!(
-        feed(&mut rx, &hello(5))[..],
+        feed(&mut rx, &hello(6))[..],
         [Incoming::Hello {
             accepted: false,
             ..

@@ -314,3 +314,227 @@ fn a_show_waits_for_its_command_on_the_link() {
         }
     }
 }
+
+/// `stream --take` to the emulated board on a pseudo-terminal, as to a
+/// board on a serial port: the take holds what the host wrote, the
+/// replies, and the servo targets the board's telemetry reported (kind 5,
+/// format version 2). Those must be the servo bytes the board put on its
+/// servo UART for the frames they report; `take info`, `take export`,
+/// `show build` and `replay --emulated` (comparing the telemetry) work on
+/// it.
+#[test]
+fn a_take_from_a_serial_port_holds_the_telemetrys_targets_and_replays() {
+    use marionette_host::cmd::stream::{self, Args};
+    use marionette_host::perform::Framing;
+    use marionette_host::qemu::PtyBoard;
+    use marionette_host::take::export;
+    use marionette_tests::puppet::repo;
+    let dir = tempfile::tempdir().unwrap();
+    // The shipped rig with a 60 s fail-safe (a loaded machine must not
+    // trip it), as a rig file: the take's region is made from it.
+    let text = std::fs::read_to_string(repo().join("rigs/humanoid16.toml")).unwrap();
+    let patient = text.replacen(
+        "failsafe_timeout_ms = 100 ",
+        "failsafe_timeout_ms = 60000 ",
+        1,
+    );
+    assert_ne!(patient, text);
+    let rig_path = dir.path().join("rig.toml");
+    std::fs::write(&rig_path, patient).unwrap();
+    let rig = marionette_host::rigfile::load(&rig_path).unwrap();
+    let table = rest_table(&rig);
+    let tables = dir.path().join("rest.bin");
+    std::fs::write(&tables, &table).unwrap();
+    let region = perform::region(&rig_blob(&rig, None), Some(&table));
+    let region_file = dir.path().join("region.bin");
+    std::fs::write(&region_file, &region).unwrap();
+    let rec = dir.path().join("rec.csv");
+    let mut csv = Vec::new();
+    marionette_host::cmd::record::write_csv_exact(&mut csv, &recording(300)).unwrap();
+    std::fs::write(&rec, csv).unwrap();
+    let servo_file = dir.path().join("uart1.bin");
+    let elf = marionette_host::qemu::firmware_elf("perform").unwrap();
+    let mut board = PtyBoard::start(&elf, &region_file, &servo_file).unwrap();
+    let take_path = dir.path().join("port.take");
+    let args = Args {
+        port: board.pty().display().to_string(),
+        baud: 200_000,
+        recording: rec,
+        rig: rig_path,
+        fast: false,
+        frame: Framing::Compact,
+        out: dir.path().join("out"),
+        json: false,
+        take: Some(take_path.clone()),
+        tables: Some(tables),
+        view: Default::default(),
+    };
+    let (summary, _) = stream::stream(&args).expect("stream completes");
+    assert_eq!(board.wait(Duration::from_secs(30)).unwrap(), Some(0));
+    let take = Take::load(&take_path).unwrap();
+    assert_eq!(take.region, region, "the rig file's rig and the tables");
+    assert_eq!(take.source, "stream");
+    let info = take.info();
+    assert_eq!(info.format_version, 2);
+    assert!(!info.servo_link_seen);
+    assert_eq!((info.frame_outputs, info.rest_outputs), (0, 0));
+    assert_eq!(info.sent.tracker_frames as u64, summary.sender.sent);
+    assert_eq!((info.sent.hellos, info.sent.commands), (1, 2), "{info:?}");
+    assert_eq!(info.reported_outputs, summary.telemetry);
+    assert!(info.reported_outputs >= 2, "{info:?}");
+    // Each reported set of targets is what the board put on its servo UART
+    // for the frame it reports (seq k is the k-th frame sent: Arm is 0).
+    let servo = perform::decode_maestro(&std::fs::read(&servo_file).unwrap(), 16);
+    let telemetry: Vec<u32> = take
+        .replies()
+        .iter()
+        .filter_map(|m| match m {
+            marionette_core::wire::Message::Telemetry(t) => Some(t.seq),
+            _ => None,
+        })
+        .collect();
+    let curves = take.curves();
+    assert_eq!(curves.len(), telemetry.len());
+    for ((_, targets), seq) in curves.iter().zip(&telemetry) {
+        assert_eq!(targets, &servo[*seq as usize - 1], "frame seq {seq}");
+    }
+    // Export, show build, replay.
+    let csv = export::curves_csv(&take);
+    assert_eq!(csv.lines().count(), 1 + info.reported_outputs);
+    let (_, report) =
+        marionette_host::show::build(std::slice::from_ref(&take), 4, false, true).unwrap();
+    assert!(
+        report.frames > 0 && report.worst_quarter_us <= 4,
+        "{report:?}"
+    );
+    let replayed = replay::emulated(&take, Pacing::AsFastAsPossible, 1.0).unwrap();
+    assert_eq!(replayed.compares, "telemetry", "{replayed:?}");
+    assert_eq!(replayed.mismatches, None);
+    assert_eq!(
+        (replayed.telemetry_compared, replayed.telemetry_mismatches),
+        (info.reported_outputs, 0),
+        "{replayed:?}"
+    );
+}
+
+/// A show the board refuses (a flipped bit, built for another rig, cut
+/// short) plays nothing, even flashed to play at boot: the servos stay at
+/// rest (no servo byte), the board's `Status` (protocol version 5) names
+/// the reason and counts the refusals (1 at boot, +1 for a `Show` command
+/// it refuses), and `show play` on the host says why.
+#[test]
+fn a_damaged_show_is_refused_with_a_counted_reason_and_nothing_moves() {
+    use marionette_core::frame::{Performer, Region};
+    use marionette_core::solve::SolverState;
+    use marionette_core::wire::{Command, CommandKind, Hello, Message, ShowState};
+    use marionette_host::qemu::{self, Config, Emulator, PtyBoard};
+    use marionette_host::show;
+    let take = emulated_take(120);
+    let (blob, _) = show::build(std::slice::from_ref(&take), 4, true, true).unwrap();
+    let recrc = |mut b: Vec<u8>| {
+        let n = b.len() - 4;
+        let crc = marionette_core::crc::crc32(&b[..n]);
+        b[n..].copy_from_slice(&crc.to_le_bytes());
+        b
+    };
+    let mut flipped = blob.clone();
+    flipped[blob.len() / 2] ^= 0x08;
+    let mut other_rig = blob.clone();
+    other_rig[8] ^= 1; // the rig hash
+    // Cut short: within its header, or after it (its CRC then fails).
+    let cases = [
+        (flipped, ShowState::BadCrc),
+        (recrc(other_rig), ShowState::RigMismatch),
+        (blob[..20].to_vec(), ShowState::Truncated),
+        (blob[..blob.len() - 10].to_vec(), ShowState::BadCrc),
+    ];
+    let status = |replies: &[u8]| {
+        perform::decode_replies(replies)
+            .into_iter()
+            .rev()
+            .find_map(|m| match m {
+                Message::Status(s) => Some(s),
+                _ => None,
+            })
+    };
+    let encode = |m: Message| perform::encode(&m).unwrap();
+    for (k, (bad, reason)) in cases.iter().enumerate() {
+        let bytes = show::with_show(&take.region, bad).unwrap();
+        // The core: refused, never played, reported.
+        let region = Region::parse(&bytes);
+        let mut solver = SolverState::new();
+        let p = Performer::new(&region, &mut solver);
+        assert_eq!(p.playing(), None, "{reason:?}");
+        assert_eq!(
+            (p.status(None).show, p.status(None).show_refusals),
+            (*reason, 1)
+        );
+        // The emulated board.
+        let mut file = tempfile::NamedTempFile::new().unwrap();
+        std::io::Write::write_all(&mut file, &bytes).unwrap();
+        let config = Config {
+            tables: Some(file.path().to_path_buf()),
+            ..Config::new(qemu::firmware_elf("perform").unwrap())
+        };
+        let mut board = Emulator::start(&config).unwrap();
+        board
+            .send(&encode(Message::Hello(Hello {
+                protocol_version: marionette_core::wire::PROTOCOL_VERSION,
+            })))
+            .unwrap();
+        board.wait_replies(|b| status(b).is_some()).unwrap();
+        let st = status(&board.replies_so_far()).unwrap();
+        assert_eq!((st.show, st.show_refusals), (*reason, 1), "{st:?}");
+        assert!(st.table_ok, "the rig and tables still perform");
+        board
+            .send(&encode(Message::Command(Command {
+                seq: 1,
+                kind: CommandKind::Show { play: true },
+            })))
+            .unwrap();
+        board
+            .send(&encode(Message::Command(Command {
+                seq: 2,
+                kind: CommandKind::RequestStatus,
+            })))
+            .unwrap();
+        board
+            .wait_replies(|b| status(b).is_some_and(|s| s.request_seq == Some(2)))
+            .unwrap();
+        let replies = perform::decode_replies(&board.replies_so_far());
+        assert!(
+            replies
+                .iter()
+                .any(|m| matches!(m, Message::Ack(a) if a.seq == 1 && !a.ok)),
+            "{replies:?}"
+        );
+        let st = status(&board.replies_so_far()).unwrap();
+        assert_eq!((st.show, st.show_refusals), (*reason, 2), "{st:?}");
+        assert!(board.take_servo().is_empty(), "{reason:?}: a servo moved");
+        drop(board);
+        // The host says why (once is enough: the same code for each).
+        if k == 0 {
+            let servo = tempfile::NamedTempFile::new().unwrap();
+            let elf = qemu::firmware_elf("perform").unwrap();
+            let pty = PtyBoard::start(&elf, file.path(), servo.path()).unwrap();
+            let args = marionette_host::cmd::show::Args {
+                action: marionette_host::cmd::show::Action::Play(
+                    marionette_host::cmd::show::PlayArgs {
+                        port: pty.pty().display().to_string(),
+                        baud: 200_000,
+                        stop: false,
+                    },
+                ),
+            };
+            let err = marionette_host::cmd::show::run(&args)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains("refused its flashed show (BadCrc")
+                    && err.contains("counted 2 time(s)")
+                    && err.contains("show build"),
+                "{err}"
+            );
+        }
+    }
+}

@@ -9,7 +9,7 @@
 use marionette_core::wire::{
     self, Ack, Command, CommandKind, ErrorCounters, FRAME_CAPACITY, FrameReader, Hello, Incoming,
     List, MAX_FRAME, MAX_PAYLOAD, MAX_SENSORS, Message, PROTOCOL_VERSION, Params, Receiver, Sensor,
-    Session, Status, StatusReason, Telemetry, TrackerFrame, WireError, cobs,
+    Session, ShowState, Status, StatusReason, Telemetry, TrackerFrame, WireError, cobs,
 };
 use marionette_core::wire::{FrameTiming, State, Trip};
 use proptest::prelude::*;
@@ -193,7 +193,8 @@ fn status_exact() {
     // 04 (Status) 02 (version) 01 (armed) 00 (table_ok false) 04 (BadCrc)
     // errors: 01 02 00 00 00 AC 02 00 00 (cobs 1, crc 2, lost 300)
     // 80 01 (frames_ok 128); version 2's appended fields: 01 05
-    // (request_seq Some(5)), 02 (state Armed), 03 (trips); crc 0xFD70FA01.
+    // (request_seq Some(5)), 02 (state Armed), 03 (trips); version 5's:
+    // 09 (show RigMismatch) 02 (show_refusals); crc 0x3A661FA9 (zlib's).
     check_exact(
         Message::Status(Status {
             protocol_version: 2,
@@ -210,10 +211,12 @@ fn status_exact() {
             request_seq: Some(5),
             state: State::Armed,
             trips: 3,
+            show: ShowState::RigMismatch,
+            show_refusals: 2,
         }),
         &[
             0x04, 0x04, 0x02, 0x01, 0x04, 0x04, 0x01, 0x02, 0x01, 0x01, 0x03, 0xAC, 0x02, 0x01,
-            0x0B, 0x80, 0x01, 0x01, 0x05, 0x02, 0x03, 0x01, 0xFA, 0x70, 0xFD, 0x00,
+            0x0D, 0x80, 0x01, 0x01, 0x05, 0x02, 0x03, 0x09, 0x02, 0xA9, 0x1F, 0x66, 0x3A, 0x00,
         ],
     );
 }
@@ -246,6 +249,8 @@ fn status_reason_tags_exact() {
             request_seq: None,
             state: State::Unready,
             trips: 0,
+            show: ShowState::None,
+            show_refusals: 0,
         });
         let frame = encode(&msg);
         let mut payload = [0u8; MAX_FRAME];
@@ -290,8 +295,8 @@ fn telemetry_exact() {
     );
 }
 
-/// The `State` tags are the contract: the payload's last byte but one of a
-/// `Status` with `trips: 0` and no `request_seq`.
+/// The `State` tags are the contract: the payload's fourth byte from the
+/// end of a `Status` with `trips: 0`, no `request_seq` and no show.
 #[test]
 fn state_tags_exact() {
     let states = [
@@ -311,14 +316,57 @@ fn state_tags_exact() {
             request_seq: None,
             state,
             trips: 0,
+            show: ShowState::None,
+            show_refusals: 0,
         });
         let mut out = [0u8; MAX_PAYLOAD];
         let p = wire::encode_payload(&msg, &mut out).unwrap();
         assert_eq!(
             p,
-            &[4, 2, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, tag, 0],
+            &[4, 2, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, tag, 0, 0, 0],
             "{state:?}"
         );
+    }
+}
+
+/// The `ShowState` tags (version 5) are the contract: the payload's last
+/// byte but one of a `Status` with `show_refusals: 0`.
+#[test]
+fn show_state_tags_exact() {
+    let shows = [
+        (ShowState::None, 0),
+        (ShowState::Ready, 1),
+        (ShowState::Playing, 2),
+        (ShowState::Truncated, 3),
+        (ShowState::BadMagic, 4),
+        (ShowState::BadVersion, 5),
+        (ShowState::BadCrc, 6),
+        (ShowState::BadHeader, 7),
+        (ShowState::BadKeys, 8),
+        (ShowState::RigMismatch, 9),
+    ];
+    for (show, tag) in shows {
+        let msg = Message::Status(Status {
+            protocol_version: 5,
+            armed: false,
+            table_ok: true,
+            reason: StatusReason::Ok,
+            errors: ErrorCounters::new(),
+            frames_ok: 0,
+            request_seq: None,
+            state: State::Disarmed,
+            trips: 0,
+            show,
+            show_refusals: 0,
+        });
+        let mut out = [0u8; MAX_PAYLOAD];
+        let p = wire::encode_payload(&msg, &mut out).unwrap();
+        assert_eq!(
+            p,
+            &[4, 5, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, tag, 0],
+            "{show:?}"
+        );
+        assert_eq!(show.is_refused(), tag >= 3, "{show:?}");
     }
 }
 
@@ -348,6 +396,8 @@ fn message_tags_are_the_contract() {
             request_seq: None,
             state: State::Unready,
             trips: 0,
+            show: ShowState::None,
+            show_refusals: 0,
         }),
         Message::Telemetry(Telemetry {
             seq: 0,
@@ -913,6 +963,13 @@ fn arb_message() -> impl Strategy<Value = Message> {
                     State::FailSafe,
                 ][(e[1] % 4) as usize],
                 trips: e[2],
+                show: [
+                    ShowState::None,
+                    ShowState::Playing,
+                    ShowState::BadCrc,
+                    ShowState::RigMismatch,
+                ][(e[3] % 4) as usize],
+                show_refusals: e[4],
             })
         }),
         (

@@ -1011,6 +1011,8 @@ mod tests {
             request_seq: None,
             state: marionette_core::wire::State::Unready,
             trips: 0,
+            show: marionette_core::wire::ShowState::None,
+            show_refusals: 0,
         }))
         .unwrap();
         assert!(!arm_answered(&bytes));

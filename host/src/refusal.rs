@@ -22,7 +22,7 @@ use crate::board::{self, Board};
 use marionette_core::region::{self, EntryKind, Region};
 use marionette_core::rig::Rig;
 use marionette_core::table::{Kind, Table};
-use marionette_core::wire::{Message, StatusReason};
+use marionette_core::wire::{Message, ShowState, StatusReason};
 use serde::Serialize;
 
 /// Exit code: the board never armed (see the module doc).
@@ -79,6 +79,58 @@ pub fn explain(reason: StatusReason) -> (&'static str, &'static str) {
             "the rig has more segments than its firmware holds",
             "use a rig of at most 24 segments (`marionette rig check RIG` says per board)",
         ),
+    }
+}
+
+/// The board's flashed show as its `Status` reports it (protocol version
+/// 5): the state, and the refusals it counted since boot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct ShowReport {
+    /// `None`, `Ready`, `Playing`, or why the board refused it
+    /// (`Truncated`, `BadMagic`, `BadVersion`, `BadCrc`, `BadHeader`,
+    /// `BadKeys`, `RigMismatch`).
+    pub state: ShowState,
+    /// Whether the board refused its show (it then plays nothing).
+    pub refused: bool,
+    /// Refusals the board counted: once at boot, once for each trigger
+    /// refused because of it.
+    pub refusals: u32,
+}
+
+impl ShowReport {
+    /// The show as the last `Status` among `replies` reports it.
+    #[must_use]
+    pub fn of(replies: &[Message]) -> Option<Self> {
+        replies.iter().rev().find_map(|m| match m {
+            Message::Status(s) => Some(Self {
+                state: s.show,
+                refused: s.show.is_refused(),
+                refusals: s.show_refusals,
+            }),
+            _ => None,
+        })
+    }
+
+    /// A refused show in words with what to do (`None` if it was not
+    /// refused).
+    #[must_use]
+    pub fn refusal_line(&self) -> Option<String> {
+        let why = match self.state {
+            ShowState::Truncated => "it is cut short (shorter than its header and tables say)",
+            ShowState::BadMagic => "it is not a show (its magic is wrong)",
+            ShowState::BadVersion => "it was written in a show format this firmware does not read",
+            ShowState::BadCrc => "it is damaged: its CRC does not match",
+            ShowState::BadHeader => "a header field is out of range",
+            ShowState::BadKeys => "a channel's keys are out of order",
+            ShowState::RigMismatch => "it was built for another rig than the one in its flash",
+            ShowState::None | ShowState::Ready | ShowState::Playing => return None,
+        };
+        Some(format!(
+            "the board refused its flashed show ({:?}: {why}; counted {} time(s)); it plays \
+             nothing and its servos stay at rest: rebuild the show from takes of this rig \
+             (`marionette show build TAKE -o show.bin --region region.bin`) and flash the region",
+            self.state, self.refusals
+        ))
     }
 }
 
@@ -439,6 +491,8 @@ mod tests {
             request_seq: None,
             state: marionette_core::wire::State::Unready,
             trips: 0,
+            show: marionette_core::wire::ShowState::None,
+            show_refusals: 0,
         })
     }
 

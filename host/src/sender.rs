@@ -22,7 +22,7 @@
 //! order and go before the next tracker frame.
 
 use crate::link::Link;
-use crate::perform::{Framing, frame_bytes, tracker_message};
+use crate::perform::{Framing, Sent, frame_bytes, tracker_message};
 use marionette_core::rig::MAX_PARAMS;
 use marionette_core::wire::{Command, CommandKind, List, Message, Params, TrackerFrame};
 use std::collections::VecDeque;
@@ -65,6 +65,9 @@ struct Queue {
     counts: Counts,
     /// Frames written, with the sequence numbers they went with.
     sent: Vec<TrackerFrame>,
+    /// Every message written (commands, `Params`, frames), as written, at
+    /// the time it went (µs since the sender started): a take's session.
+    written: Vec<Sent>,
     /// The writer has sent everything and stops.
     closing: bool,
     /// The writer stopped on a failed port.
@@ -92,7 +95,8 @@ impl Sender {
     pub fn spawn<W: Write + Send + 'static>(port: W, link: Link, framing: Framing) -> Self {
         let shared: Shared = Arc::new((Mutex::new(Queue::default()), Condvar::new()));
         let inner = Arc::clone(&shared);
-        let writer = std::thread::spawn(move || write_loop(port, link, framing, &inner));
+        let start = Instant::now();
+        let writer = std::thread::spawn(move || write_loop(port, link, framing, &inner, start));
         Self {
             shared,
             writer: Some(writer),
@@ -136,6 +140,13 @@ impl Sender {
     /// for a recording written as it goes.
     pub fn take_sent(&self) -> Vec<TrackerFrame> {
         std::mem::take(&mut lock(&self.shared).sent)
+    }
+
+    /// Takes every message written so far (see [`Sender::finish`]'s
+    /// frames: these are all of them, commands and `Params` too), each the
+    /// bytes as written at its time, µs since the sender started.
+    pub fn take_written(&self) -> Vec<Sent> {
+        std::mem::take(&mut lock(&self.shared).written)
     }
 
     /// What the sender did so far.
@@ -203,7 +214,13 @@ enum Next {
 
 /// The writer thread: waits for the link to be free and something to send,
 /// sends it, records it.
-fn write_loop<W: Write>(mut port: W, link: Link, framing: Framing, shared: &Shared) {
+fn write_loop<W: Write>(
+    mut port: W,
+    link: Link,
+    framing: Framing,
+    shared: &Shared,
+    start: Instant,
+) {
     let mut seq = 0u32;
     let mut free_at = Instant::now();
     loop {
@@ -239,6 +256,7 @@ fn write_loop<W: Write>(mut port: W, link: Link, framing: Framing, shared: &Shar
             }
         };
         let bytes = bytes.unwrap_or_default();
+        let time_us = u32::try_from(start.elapsed().as_micros()).unwrap_or(u32::MAX);
         let result = write_fully(&mut port, &bytes);
         let mut q = lock(shared);
         q.busy = false;
@@ -253,9 +271,10 @@ fn write_loop<W: Write>(mut port: W, link: Link, framing: Framing, shared: &Shar
             q.counts.sent += 1;
             q.sent.push(f);
         }
+        free_at = free_at.max(Instant::now()) + link.transfer_time(bytes.len());
+        q.written.push(Sent { time_us, bytes });
         shared.1.notify_all();
         drop(q);
-        free_at = free_at.max(Instant::now()) + link.transfer_time(bytes.len());
     }
 }
 

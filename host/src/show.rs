@@ -3,10 +3,15 @@
 //! straight lines within a stated error bound (the format and the decoder
 //! are the core's [`marionette_core::show`]).
 //!
-//! 1. **Frames.** Each take's outputs (frame-driven and easing) are sampled
-//!    at the rig's frame period from its first output to its last, each
-//!    frame taking the newest output at or before its time (what the servo
-//!    link holds). Takes follow one another.
+//! 1. **Frames.** Each take's outputs (frame-driven and easing) are
+//!    sampled at the rig's frame period from its first output to its last,
+//!    each frame taking the newest output at or before its time (what the
+//!    servo link holds). Takes follow one another. A take from a port holds
+//!    only the targets its telemetry reported, every tenth frame
+//!    ([`Take::curves`]): its frames are on the straight lines between them,
+//!    and, when the show has such a take, every frame is then passed
+//!    through its channel's slew limiter from rest (what a board can
+//!    follow; the bound is against those).
 //! 2. **Keys.** Per channel the rig drives, greedily: from a key at frame
 //!    `s`, the next key is the furthest frame `e` (at most [`MAX_SPAN`]
 //!    frames on) such that every frame between decodes, through the core's
@@ -96,13 +101,14 @@ pub fn frames(takes: &[Take]) -> Result<(Vec<Vec<u16>>, u32), ShowBuildError> {
         if take.region != first.region {
             return Err(ShowBuildError::Region { index });
         }
-        let outputs = take.outputs();
+        let outputs = take.curves();
         let (Some(start), Some(end)) = (outputs.first(), outputs.last()) else {
             return Err(ShowBuildError::Empty(format!(
                 "take {index} has no outputs"
             )));
         };
         let span = end.0.wrapping_sub(start.0);
+        let reported = take.outputs().is_empty();
         let mut k = 0usize;
         let mut t = 0u32;
         while t <= span {
@@ -112,7 +118,11 @@ pub fn frames(takes: &[Take]) -> Result<(Vec<Vec<u16>>, u32), ShowBuildError> {
             {
                 k += 1;
             }
-            out.push(outputs.get(k).map(|o| o.2.clone()).unwrap_or_default());
+            let held = outputs.get(k).map(|o| o.1.clone()).unwrap_or_default();
+            out.push(match (reported, outputs.get(k), outputs.get(k + 1)) {
+                (true, Some(a), Some(b)) => between(a, b, start.0.wrapping_add(t)),
+                _ => held,
+            });
             t = match t.checked_add(period) {
                 Some(next) => next,
                 None => break,
@@ -120,6 +130,28 @@ pub fn frames(takes: &[Take]) -> Result<(Vec<Vec<u16>>, u32), ShowBuildError> {
         }
     }
     Ok((out, period))
+}
+
+/// The targets at time `t` on the straight line from `a` to `b` (times
+/// and targets), rounded to the nearest.
+fn between(a: &(u32, Vec<u16>), b: &(u32, Vec<u16>), t: u32) -> Vec<u16> {
+    let span = f64::from(b.0.wrapping_sub(a.0).max(1));
+    let w = f64::from(t.wrapping_sub(a.0)) / span;
+    a.1.iter()
+        .zip(&b.1)
+        .map(|(&x, &y)| (f64::from(x) + w * (f64::from(y) - f64::from(x))).round() as u16)
+        .collect()
+}
+
+/// `frames` as each channel's slew limiter (from rest) plays them: what a
+/// board can follow.
+fn followed(frames: &mut [Vec<u16>], limiters: &[Option<Slew>]) {
+    let mut limiters = limiters.to_vec();
+    for targets in frames {
+        for (v, slew) in targets.iter_mut().zip(limiters.iter_mut()) {
+            *v = played(slew, *v);
+        }
+    }
 }
 
 /// What a board makes of a decoded target: the channel's slew limiter
@@ -297,12 +329,15 @@ pub fn build(
     looping: bool,
     at_boot: bool,
 ) -> Result<(Vec<u8>, Report), ShowBuildError> {
-    let (frames, period) = frames(takes)?;
+    let (mut frames, period) = frames(takes)?;
     let region_bytes = &takes.first().ok_or(ShowBuildError::NoRig)?.region;
     let region = Region::parse(region_bytes);
     let rig = region.rig.as_ref().ok_or(ShowBuildError::NoRig)?;
     let channels = frames.first().map_or(0, Vec::len);
     let limiters = slews(rig, channels);
+    if takes.iter().any(|t| t.outputs().is_empty()) {
+        followed(&mut frames, &limiters);
+    }
     let driven: Vec<Option<Option<Slew>>> = limiters.iter().map(|s| s.map(Some)).collect();
     let flags = if looping { show::LOOP } else { 0 } | if at_boot { show::AT_BOOT } else { 0 };
     let blob = encode(&frames, &driven, rig.rig_hash(), period, bound, flags)?;

@@ -53,7 +53,7 @@ fn every_page_is_listed_and_every_page_has_examples() {
     let mut pages: Vec<String> = std::fs::read_dir(repo().join("docs"))
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .filter(|n| n != "README.md")
+        .filter(|n| n.ends_with(".md") && n != "README.md")
         .collect();
     pages.sort();
     assert_eq!(
@@ -230,6 +230,18 @@ fn the_take_example_is_the_bytes_the_host_writes() {
         ],
     };
     let bytes = take.to_bytes().unwrap();
+    assert_eq!(hex_bytes(&block), bytes[..bytes.len() - 4]);
+    // The same take from a port: version 2, the targets reported (kind 5).
+    let block = of("take.md", "text").remove(1);
+    let port = Take {
+        source: "p".into(),
+        events: vec![
+            take.events[0].clone(),
+            Event::targets_of(EventKind::Reported, 6, &[0x1770, 0x0001]),
+        ],
+        ..take
+    };
+    let bytes = port.to_bytes().unwrap();
     assert_eq!(hex_bytes(&block), bytes[..bytes.len() - 4]);
 }
 

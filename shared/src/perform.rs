@@ -68,6 +68,11 @@
 //! frame); tracker frames
 //! taken while it plays move nothing; `Jog` is refused while it plays.
 //!
+//! A region whose show fails its checks (truncated, a flipped bit, built
+//! for another rig: [`crate::show::ShowError`]) plays nothing: the servos
+//! stay at rest. `Status` says why ([`ShowState`]) and counts the refusals:
+//! one at boot, one for each trigger refused because of it.
+//!
 //! ## Replies
 //!
 //! - `Hello` → `Status` (with `request_seq: None`).
@@ -90,11 +95,11 @@
 
 use crate::frame::{Cycles, Pipeline, Region, stage};
 use crate::pose::{MAX_SEGMENTS, Pose};
-use crate::show::{Cursor as ShowCursor, Show};
+use crate::show::{Cursor as ShowCursor, Show, ShowError};
 use crate::solve::SolverState;
 use crate::wire::{
     Ack, CommandKind, ErrorCounters, FrameTiming, Incoming, List, Message, PROTOCOL_VERSION,
-    Receiver, STAGES, State, Status, StatusReason, Telemetry, Trip, ValidCommand,
+    Receiver, STAGES, ShowState, State, Status, StatusReason, Telemetry, Trip, ValidCommand,
 };
 
 /// A telemetry message goes out after every this many performed frames.
@@ -288,6 +293,10 @@ pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
     /// The show's next frame, while it plays.
     playing: Option<u32>,
     cursor: ShowCursor,
+    /// Why the region's show was refused ([`ShowState::None`] if it was
+    /// not), and the refusals counted since boot.
+    show_refused: ShowState,
+    show_refusals: u32,
 }
 
 impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
@@ -308,6 +317,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             (p.rig().frame_period_us(), p.rig().failsafe_timeout_ms())
         });
         let show = region.show.filter(|_| pipeline.is_some());
+        let show_refused = region.show_error.map_or(ShowState::None, refusal);
         Self {
             pipeline,
             receiver: Receiver::new(),
@@ -327,6 +337,18 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             show,
             playing: show.filter(Show::at_boot).map(|_| 0),
             cursor: ShowCursor::default(),
+            show_refused,
+            show_refusals: u32::from(show_refused.is_refused()),
+        }
+    }
+
+    /// The flashed show's state, as `Status` reports it.
+    #[must_use]
+    pub fn show_state(&self) -> ShowState {
+        match (self.playing, &self.show) {
+            (Some(_), _) => ShowState::Playing,
+            (None, Some(_)) => ShowState::Ready,
+            (None, None) => self.show_refused,
         }
     }
 
@@ -346,6 +368,8 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         if ok {
             self.playing = Some(0);
             self.cursor = ShowCursor::default();
+        } else if self.show_refused.is_refused() {
+            self.show_refusals = self.show_refusals.saturating_add(1);
         }
         ok
     }
@@ -528,6 +552,8 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             request_seq,
             state: self.state(),
             trips: self.trips,
+            show: self.show_state(),
+            show_refusals: self.show_refusals,
         }
     }
 
@@ -724,5 +750,18 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             last_trip: self.last_trip,
             timing: self.timing.report(self.budget(cycles)),
         })
+    }
+}
+
+/// Why the region's show was refused, as `Status` reports it.
+const fn refusal(e: ShowError) -> ShowState {
+    match e {
+        ShowError::Truncated => ShowState::Truncated,
+        ShowError::Magic => ShowState::BadMagic,
+        ShowError::Version(_) => ShowState::BadVersion,
+        ShowError::Crc => ShowState::BadCrc,
+        ShowError::Header => ShowState::BadHeader,
+        ShowError::Keys(_) => ShowState::BadKeys,
+        ShowError::RigMismatch => ShowState::RigMismatch,
     }
 }

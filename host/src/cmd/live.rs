@@ -16,6 +16,12 @@
 //! each new sender, each refused one, and when the source goes silent (the
 //! board's fail-safe then eases the servos to rest) or comes back.
 //!
+//! **The view.** `--view` shows the performance in a web page as `stream
+//! --view` does (the figure posed from the servo targets of the board's
+//! telemetry, the goals of the newest frame offered). `--listen` being the
+//! source's, the view's address is `--view-listen` (`127.0.0.1:8765` by
+//! default: this machine only).
+//!
 //! **The recording.** Every tracker frame actually sent is appended to
 //! `out/live/live.csv` as it goes (flushed every 100 ms, so a session ended by
 //! Ctrl-C is kept up to then): `marionette sim --recording out/live/live.csv`
@@ -54,7 +60,8 @@ pub struct Args {
     #[arg(long, default_value = "rigs/humanoid16.toml")]
     pub rig: PathBuf,
     /// The table blob for the emulated board (`marionette demo` writes
-    /// `out/reach_humanoid16.bin`); a real board has its own in flash.
+    /// `out/reach_humanoid16.bin`); a real board has its own in flash
+    /// (given with `--port`, it is only kept in the take).
     #[arg(long)]
     pub tables: Option<PathBuf>,
     /// A real board's tracker serial port (default: the emulated board).
@@ -84,13 +91,19 @@ pub struct Args {
     /// `region.bin`, `servo_live.bin`).
     #[arg(long, default_value = "out/live")]
     pub out: PathBuf,
-    /// Also save the session as a take (docs/take.md; the emulated board
-    /// only: a real board's servo output is not seen).
+    /// Also save the session as a take (docs/take.md). On the emulated
+    /// board it holds the servo outputs; with `--port`, the servo targets
+    /// the board's telemetry reported (its servo link is not seen), and the
+    /// rig with `--tables` if given.
     #[arg(long)]
     pub take: Option<PathBuf>,
     /// Print the summary as JSON (and nothing else).
     #[arg(long)]
     pub json: bool,
+    /// The live view (`--view`, `--view-listen`), from the board's
+    /// telemetry.
+    #[command(flatten)]
+    pub view: super::view::LiveViewArgs,
 }
 
 /// The emulated board's output against the core on the recording.
@@ -353,18 +366,28 @@ pub fn live(
         quiet,
     };
     let mut source = Source::new(rig.live.clone());
-    let (offered, seconds) = listen_loop(
-        args,
-        listener,
-        stop,
-        &mut senders,
-        &mut source,
-        &sender,
-        &mut recording,
-    )?;
+    let title = format!("{}: live from udp://{listen}", rig.name());
+    let view = super::view::ViewArgs::from(&args.view);
+    let rig_blob = rigfile::to_blob(&rig)?;
+    let (offered, seconds) = super::view::watched_board(&view, &rig_blob, &title, &[], |hook| {
+        listen_loop(
+            args,
+            (listener, stop),
+            (&mut senders, &mut source),
+            &sender,
+            &mut recording,
+            &|offered, newest| {
+                hook(offered, sender.counts().dropped, newest, &|| {
+                    replies.recent(4096)
+                });
+            },
+        )
+    })?;
     sender.drain(Duration::from_secs(2));
     sender.command(CommandKind::Disarm);
     let failed = sender.failed();
+    sender.drain(Duration::from_secs(2));
+    let written = sender.take_written();
     let (counts, rest) = sender.finish(Duration::from_secs(2));
     recording.append(&rest)?;
     recording.file.flush()?;
@@ -389,7 +412,18 @@ pub fn live(
         &args.out.join("telemetry.csv"),
     )?;
     let emulated = match &mut board {
-        Board::Real => None,
+        Board::Real => {
+            if let Some(path) = &args.take {
+                stream::save_port_take(
+                    ("live", path),
+                    &rig_blob,
+                    args.tables.as_deref(),
+                    &written,
+                    &messages,
+                )?;
+            }
+            None
+        }
         Board::Emulated {
             board,
             region,
@@ -416,16 +450,17 @@ pub fn live(
     Ok((summary, messages))
 }
 
-/// Reads packets until stopped, offering frames and parameters; returns
-/// the tracker frames offered and the seconds it ran.
+/// Reads packets until stopped, offering frames and parameters and telling
+/// `progress` (the view) the frames offered so far and the newest, after
+/// every packet or read time-out; returns the tracker frames offered and
+/// the seconds it ran.
 fn listen_loop(
     args: &Args,
-    listener: &Listener,
-    stop: &AtomicBool,
-    senders: &mut Senders,
-    source: &mut Source,
+    (listener, stop): (&Listener, &AtomicBool),
+    (senders, source): (&mut Senders, &mut Source),
     sender: &Sender,
     recording: &mut Recording,
+    progress: &dyn Fn(usize, Option<&TrackerFrame>),
 ) -> Result<(usize, f64), CmdError> {
     let start = Instant::now();
     let end = args
@@ -434,6 +469,7 @@ fn listen_loop(
     let silence = Duration::from_millis(args.silence_ms);
     let mut buf = vec![0u8; 65_536];
     let mut offered = 0;
+    let mut newest = None;
     let mut flushed = Instant::now();
     while !stop.load(Ordering::Relaxed) && end.is_none_or(|e| Instant::now() < e) {
         match listener.socket.recv_from(&mut buf) {
@@ -447,11 +483,13 @@ fn listen_loop(
                     if heard.sensors && !sensors.as_slice().is_empty() {
                         let time_us =
                             u32::try_from(start.elapsed().as_micros()).unwrap_or(u32::MAX);
-                        sender.offer(TrackerFrame {
+                        let frame = TrackerFrame {
                             seq: 0,
                             time_us,
                             sensors,
-                        });
+                        };
+                        sender.offer(frame);
+                        newest = Some(frame);
                         offered += 1;
                     }
                 }
@@ -464,6 +502,7 @@ fn listen_loop(
             Err(e) => return Err(format!("reading udp: {e}").into()),
         }
         senders.check_silence(silence);
+        progress(offered, newest.as_ref());
         if flushed.elapsed() >= Duration::from_millis(100) {
             recording.append(&sender.take_sent())?;
             recording.file.flush()?;
@@ -553,6 +592,7 @@ fn print_summary(s: &Summary) {
     if !b.disarm_acked {
         println!("board: no Ack of Disarm within 20 s: its last replies may be missing");
     }
+    stream::print_show(b.show.as_ref());
     if let Some(e) = &s.emulated {
         println!(
             "emulated board: {} servo outputs compared with sim on {}: {} differ ({} fail-safe \

@@ -3,14 +3,18 @@
 //! board on a serial port (`--port DEV`), at the take's times (`--speed`
 //! scales them) or as fast as the link takes it (`--fast`).
 //!
-//! On the emulated board every servo output is compared with the take's:
-//! they must be bit-identical (the command fails otherwise). On a port the
-//! board's servo bus is not seen; its replies are counted.
+//! It compares what it can, and says what (`compares`): on the emulated
+//! board, every servo output with the take's if the take holds them (a
+//! take from the emulated board: they must be bit-identical); everywhere,
+//! the servo targets of each `Telemetry` with the take's of the same
+//! tracker frame (sequence number), which a take from a port holds too
+//! (a board on a port shows no servo output). Any difference fails the
+//! command.
 
 use super::CmdError;
 use super::stream::{Replies, await_disarm};
 use crate::perform::{self, Pacing, Sent};
-use crate::refusal::{self, Stop};
+use crate::refusal::{self, ShowReport, Stop};
 use crate::take::Take;
 use marionette_core::wire::Message;
 use serde::Serialize;
@@ -56,8 +60,17 @@ pub struct Summary {
     /// Servo outputs the board sent (`null` on a port: not seen).
     pub board_outputs: Option<usize>,
     /// Outputs that differ from the take's, missing or extra ones counted
-    /// (`null` on a port).
+    /// (`null` on a port, or for a take from a port: not compared).
     pub mismatches: Option<usize>,
+    /// What was compared: `servo outputs and telemetry`, `telemetry`
+    /// (servo targets of each `Telemetry`, by frame), or `nothing` (the
+    /// take holds no telemetry to compare with).
+    pub compares: String,
+    /// Telemetry messages of the take compared with the board's.
+    pub telemetry_compared: usize,
+    /// Of those, the ones whose servo targets differ or that the board did
+    /// not send.
+    pub telemetry_mismatches: usize,
     /// Replies (messages) the board sent.
     pub replies: usize,
     /// Fail-safe trips the board reported in this replay, and in the take
@@ -66,6 +79,8 @@ pub struct Summary {
     pub failsafe_trips: [usize; 2],
     /// Wall-clock seconds.
     pub seconds: f64,
+    /// The board's flashed show, from its last `Status`.
+    pub show: Option<ShowReport>,
 }
 
 /// The take's session with its times scaled by `1 / speed` (from the first).
@@ -87,6 +102,40 @@ pub fn scaled(session: &[Sent], speed: f64) -> Vec<Sent> {
 pub fn mismatches(a: &[Vec<u16>], b: &[Vec<u16>]) -> usize {
     let differ = a.iter().zip(b).filter(|(x, y)| x != y).count();
     differ + a.len().abs_diff(b.len())
+}
+
+/// Compares the servo targets of each `Telemetry` of `take` with the
+/// board's of the same frame (sequence number): `(compared, mismatches)`,
+/// a telemetry the board did not send counted as a mismatch.
+#[must_use]
+pub fn telemetry_mismatches(take: &[Message], board: &[Message]) -> (usize, usize) {
+    let targets = |replies: &[Message]| -> Vec<(u32, Vec<u16>)> {
+        replies
+            .iter()
+            .filter_map(|m| match m {
+                Message::Telemetry(t) => Some((t.seq, t.servo_targets.as_slice().to_vec())),
+                _ => None,
+            })
+            .collect()
+    };
+    let ours = targets(board);
+    let theirs = targets(take);
+    let differ = theirs
+        .iter()
+        .filter(|(seq, want)| !ours.iter().any(|(s, got)| s == seq && got == want))
+        .count();
+    (theirs.len(), differ)
+}
+
+/// What a replay compared, in words (see the module doc).
+fn compares(outputs: bool, telemetry: usize) -> String {
+    match (outputs, telemetry > 0) {
+        (true, true) => "servo outputs and telemetry",
+        (true, false) => "servo outputs",
+        (false, true) => "telemetry",
+        (false, false) => "nothing",
+    }
+    .into()
 }
 
 /// The emulated board, as refusals name it.
@@ -139,18 +188,25 @@ pub fn emulated(take: &Take, pacing: Pacing, speed: f64) -> Result<Summary, CmdE
         .cloned()
         .collect();
     let expected: Vec<Vec<u16>> = take.outputs().into_iter().map(|o| o.2).collect();
+    let seen = !expected.is_empty();
+    let (telemetry_compared, telemetry_mismatches) =
+        telemetry_mismatches(&take.replies(), &board.replies);
     Ok(Summary {
         board: "emulated".into(),
         sent: session.len(),
         take_outputs: expected.len(),
         board_outputs: Some(sent.len()),
-        mismatches: Some(mismatches(&expected, &sent)),
+        mismatches: seen.then(|| mismatches(&expected, &sent)),
+        compares: compares(seen, telemetry_compared),
+        telemetry_compared,
+        telemetry_mismatches,
         replies: board.replies.len(),
         failsafe_trips: [
             perform::reported_trips(&board.replies).len(),
             perform::reported_trips(&take.replies()).len(),
         ],
         seconds: start.elapsed().as_secs_f64(),
+        show: ShowReport::of(&board.replies),
     })
 }
 
@@ -201,18 +257,24 @@ pub fn on_port(
     if let Some(stop) = stop_of(&format!("the board on {port_name}"), &messages, take, None) {
         return Err(Box::new(stop));
     }
+    let (telemetry_compared, telemetry_mismatches) =
+        telemetry_mismatches(&take.replies(), &messages);
     let summary = Summary {
         board: port_name.to_string(),
         sent: session.len(),
         take_outputs: take.outputs().len(),
         board_outputs: None,
         mismatches: None,
+        compares: compares(false, telemetry_compared),
+        telemetry_compared,
+        telemetry_mismatches,
         replies: messages.len(),
         failsafe_trips: [
             perform::reported_trips(&messages).len(),
             perform::reported_trips(&take.replies()).len(),
         ],
         seconds: start.elapsed().as_secs_f64(),
+        show: ShowReport::of(&messages),
     };
     Ok((summary, messages))
 }
@@ -239,7 +301,8 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     } else {
         println!(
             "replay on {}: {} messages sent, {} replies, fail-safe trips {} (take: {}); \
-             {} servo outputs in the take, {} from the board, {} differ ({:.1} s)",
+             {} servo outputs in the take, {} from the board, {} differ; {} telemetry \
+             compared, {} differ; compared: {} ({:.1} s)",
             summary.board,
             summary.sent,
             summary.replies,
@@ -252,11 +315,22 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
             summary
                 .mismatches
                 .map_or_else(|| "-".into(), |n| n.to_string()),
+            summary.telemetry_compared,
+            summary.telemetry_mismatches,
+            summary.compares,
             summary.seconds
         );
+        super::stream::print_show(summary.show.as_ref());
     }
     if summary.mismatches.is_some_and(|m| m > 0) {
         return Err("the board's servo output differs from the take's".into());
+    }
+    if summary.telemetry_mismatches > 0 {
+        return Err(format!(
+            "the servo targets of {} of the take's {} telemetry messages differ from the board's",
+            summary.telemetry_mismatches, summary.telemetry_compared
+        )
+        .into());
     }
     Ok(())
 }

@@ -114,7 +114,26 @@ fn play(args: &PlayArgs) -> Result<(), CmdError> {
         Message::Ack(a) if a.seq == 1 => Some(a.ok),
         _ => None,
     });
-    replies.finish();
+    if ack == Some(false) {
+        // Why: the board's Status after the refusal.
+        let ask = Message::Command(Command {
+            seq: 2,
+            kind: CommandKind::RequestStatus,
+        });
+        port.write_all(&crate::perform::encode(&ask)?)
+            .map_err(|e| format!("{name}: {e}"))?;
+        let _ = replies.wait_for(Duration::from_secs(2), |m| match m {
+            Message::Status(s) if s.request_seq == Some(2) => Some(()),
+            _ => None,
+        });
+    }
+    let show = crate::refusal::ShowReport::of(&replies.finish());
+    if let Some(line) = show
+        .as_ref()
+        .and_then(crate::refusal::ShowReport::refusal_line)
+    {
+        return Err(format!("{name}: {line}").into());
+    }
     match ack {
         Some(true) => {
             println!(

@@ -16,7 +16,9 @@
 //!   value exact): `marionette sim` on it reproduces the board's servo
 //!   output bit for bit (given the board's fail-safe trips, which its
 //!   telemetry reports);
-//! - `telemetry.csv`: the servo targets the board reported.
+//! - `telemetry.csv`: the servo targets the board reported;
+//! - with `--take T.take`, the session as a take (docs/take.md): every
+//!   message written, the replies, and the targets the telemetry reported.
 //!
 //! It prints frames sent and dropped, the link's use against its capacity,
 //! and what the board said about itself: its state, fail-safe trips, and
@@ -27,10 +29,12 @@ use super::CmdError;
 use crate::import::csv::TrackerSample;
 use crate::link::Link;
 use crate::perform::{self, Framing};
-use crate::refusal::Stop;
+use crate::refusal::{ShowReport, Stop};
 use crate::sender::{Counts, Sender};
 use crate::{import, rigfile};
-use marionette_core::wire::{CommandKind, FrameTiming, Message, State, StatusReason, TrackerFrame};
+use marionette_core::wire::{
+    CommandKind, FrameTiming, Message, ShowState, State, StatusReason, TrackerFrame,
+};
 use serde::Serialize;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -69,6 +73,17 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+    /// Also save the session as a take (docs/take.md): the messages sent,
+    /// the board's replies, and the servo targets its telemetry reported
+    /// (a board's servo link is not seen from here).
+    #[arg(long)]
+    pub take: Option<PathBuf>,
+    /// The table blob the board's flash holds, kept in the take with the
+    /// rig (so that `replay --emulated`, `take edit` and `take export
+    /// --bvh` can run the core on it); without it the take holds the rig
+    /// only.
+    #[arg(long)]
+    pub tables: Option<PathBuf>,
     /// The live view (`--view`, `--listen`), from the board's telemetry.
     #[command(flatten)]
     pub view: super::view::ViewArgs,
@@ -110,6 +125,9 @@ pub struct Summary {
     pub telemetry_csv: String,
     /// The recording of the frames sent.
     pub sent_csv: String,
+    /// The board's flashed show, from its last `Status` (`null` if it sent
+    /// none).
+    pub show: Option<ShowReport>,
 }
 
 /// Tallies the board's replies into `s` and writes the telemetry's servo
@@ -143,6 +161,7 @@ pub fn summarize(replies: &[Message], s: &mut Summary, csv: &Path) -> Result<(),
             _ => {}
         }
     }
+    s.show = ShowReport::of(replies);
     s.telemetry_csv = csv.display().to_string();
     crate::save::save(csv, text.as_bytes(), &[])?;
     Ok(())
@@ -333,6 +352,25 @@ fn schedule(sender: &Sender, frames: &[TrackerFrame], fast: bool, after: &dyn Fn
     start.elapsed().as_secs_f64()
 }
 
+/// Saves the take of a session with a board on a port (`source` names the
+/// command): the region the host knows (the rig, and `tables` if given),
+/// every message `written`, and the board's `replies`
+/// ([`crate::take::Take::of_port`]).
+pub fn save_port_take(
+    (source, path): (&str, &Path),
+    rig_blob: &[u8],
+    tables: Option<&Path>,
+    written: &[perform::Sent],
+    replies: &[Message],
+) -> Result<(), CmdError> {
+    let tables = tables
+        .map(|t| std::fs::read(t).map_err(|e| format!("{}: {e}", t.display())))
+        .transpose()?;
+    let region = perform::region(rig_blob, tables.as_deref());
+    crate::take::Take::of_port(source, &region, written, replies)?.save(path)?;
+    Ok(())
+}
+
 /// Frames as a tracker recording.
 #[must_use]
 pub fn samples(frames: &[TrackerFrame]) -> Vec<TrackerSample> {
@@ -405,17 +443,30 @@ pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
     );
     let seconds = super::view::watched_board(&args.view, &rig_blob, &title, &frames, |hook| {
         Ok(schedule(&sender, &frames, args.fast, &|offered| {
-            hook(offered, sender.counts().dropped, &|| replies.recent(4096));
+            hook(offered, sender.counts().dropped, None, &|| {
+                replies.recent(4096)
+            });
         }))
     })?;
     sender.drain(Duration::from_secs(2));
     sender.command(CommandKind::Disarm);
     let failed = sender.failed();
+    sender.drain(Duration::from_secs(2));
+    let written = sender.take_written();
     let (counts, sent) = sender.finish(Duration::from_secs(2));
     let disarm_acked = await_disarm(&replies, Duration::from_secs(20));
     let messages = replies.finish();
     if let Some(e) = failed {
         return Err(format!("{}: the port failed: {e}", args.port).into());
+    }
+    if let Some(path) = &args.take {
+        save_port_take(
+            ("stream", path),
+            &rig_blob,
+            args.tables.as_deref(),
+            &written,
+            &messages,
+        )?;
     }
     let sent_csv = args.out.join("sent.csv");
     write_sent(&sent_csv, &sent)?;
@@ -462,10 +513,25 @@ fn print_summary(s: &Summary) {
     if !s.disarm_acked {
         println!("board: no Ack of Disarm within 20 s: its last replies may be missing");
     }
+    print_show(s.show.as_ref());
     println!(
         "frames sent: {}; telemetry: {}",
         s.sent_csv, s.telemetry_csv
     );
+}
+
+/// The board's flashed show, for a summary line: a refused one on stderr,
+/// in words with what to do.
+pub fn print_show(show: Option<&ShowReport>) {
+    match show {
+        Some(r) if r.refused => {
+            if let Some(line) = r.refusal_line() {
+                eprintln!("board: {line}");
+            }
+        }
+        Some(r) if r.state != ShowState::None => println!("board: flashed show {:?}", r.state),
+        _ => {}
+    }
 }
 
 /// The board's last reported state, for a summary line.

@@ -170,7 +170,8 @@ fn info(args: &InfoArgs) -> Result<(), CmdError> {
     println!(
         "take {} (format {}, from {}): {:.3} s, rig {}, {} channels at {} µs\n\
          sent: {} hello, {} tracker frames, {} params, {} commands\n\
-         board: {} outputs driven by frames, {} easing, {} replies ({} telemetry)\n\
+         board: {} outputs driven by frames, {} easing, {} reported by telemetry{}, {} replies \
+         ({} telemetry)\n\
          region: {} bytes{}",
         args.take.display(),
         info.format_version,
@@ -185,6 +186,12 @@ fn info(args: &InfoArgs) -> Result<(), CmdError> {
         info.sent.commands,
         info.frame_outputs,
         info.rest_outputs,
+        info.reported_outputs,
+        if info.servo_link_seen {
+            ""
+        } else {
+            " (a board on a port: its servo link not seen)"
+        },
         info.replies,
         info.telemetry,
         info.region_bytes,

@@ -1,6 +1,7 @@
-//! `marionette view`, and the `--view` options of `demo` and `emulate`: the
-//! performance shown live in a web page while the emulated board performs
-//! it ([`crate::view`]; the page is described in `docs/view.md`).
+//! `marionette view`, and the `--view` options of `demo`, `emulate`,
+//! `stream` and `live`: the performance shown live in a web page while the
+//! board performs it ([`crate::view`]; the page is described in
+//! `docs/view.md`).
 //!
 //! `marionette view` is the demo watched: the same inputs and checks as
 //! `marionette demo` (its options too), with the view on.
@@ -42,10 +43,12 @@ fn linger(args: &ViewArgs) -> std::time::Duration {
     std::time::Duration::from_secs_f64(args.view_linger.clamp(0.0, 3600.0))
 }
 
-/// What a real board's session tells its view after each frame offered:
-/// frames sent so far, frames dropped, and a way to read its recent
-/// replies (called only when a snapshot is due).
-pub type BoardHook<'h> = &'h dyn Fn(usize, u64, &dyn Fn() -> Vec<Message>);
+/// What a real board's session tells its view after each frame offered
+/// (and, for a live source, while it waits for one): frames offered so
+/// far, frames dropped, the newest frame offered when the frames are not
+/// known in advance (`live`), and a way to read its recent replies (called
+/// only when a snapshot is due).
+pub type BoardHook<'h> = &'h dyn Fn(usize, u64, Option<&TrackerFrame>, &dyn Fn() -> Vec<Message>);
 
 /// Runs `session` (a performance on a real board, `stream` or `live`, of
 /// the rig `rig_blob`) under the live view when `--view` asks for it.
@@ -63,7 +66,7 @@ pub fn watched_board<R>(
         #[cfg(not(feature = "view"))]
         return Err(NO_VIEW.into());
     }
-    session(&|_, _, _| ())
+    session(&|_, _, _, _| ())
 }
 
 /// Runs `session` (an emulated performance of `region`, given a watcher
@@ -121,7 +124,9 @@ fn with_board_view<R>(
         channels: channels(&rig),
     };
     let watch = Watch::new(&view, &rig, title, frames, format);
-    let result = session(&|sent, drops, recent| watch.replies(recent, sent, drops));
+    let result = session(&|sent, drops, newest, recent| {
+        watch.replies(recent, sent, drops, newest);
+    });
     view.end(linger(args));
     result
 }
@@ -156,6 +161,46 @@ fn with_view<R>(
     }
     view.end(linger(args));
     result
+}
+
+/// The live view's options on `marionette live`, whose `--listen` is its
+/// tracker source's (UDP): the view's address is `--view-listen`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct LiveViewArgs {
+    /// Show the performance live in a web page (as `stream --view`: the
+    /// figure from the servo targets in the board's telemetry; read-only).
+    /// The address is printed at the start.
+    #[arg(long)]
+    pub view: bool,
+    /// Where the view listens: this machine only unless told otherwise
+    /// (port 0: any free port).
+    #[arg(long, default_value = DEFAULT_LISTEN, value_name = "ADDR")]
+    pub view_listen: SocketAddr,
+    /// Seconds the page keeps being served after the session ends.
+    #[arg(long, default_value_t = 3.0, value_name = "SECONDS")]
+    pub view_linger: f64,
+}
+
+impl From<&LiveViewArgs> for ViewArgs {
+    fn from(a: &LiveViewArgs) -> Self {
+        Self {
+            view: a.view,
+            listen: a.view_listen,
+            view_linger: a.view_linger,
+        }
+    }
+}
+
+impl Default for LiveViewArgs {
+    /// No view.
+    fn default() -> Self {
+        let v = ViewArgs::default();
+        Self {
+            view: v.view,
+            view_listen: v.listen,
+            view_linger: v.view_linger,
+        }
+    }
 }
 
 impl Default for ViewArgs {

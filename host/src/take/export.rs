@@ -22,7 +22,8 @@ use std::fmt::Write as _;
 pub const BVH_UNITS_PER_M: f32 = 100.0;
 
 /// The servo curves: `time_us,ch0,…` (µs, as `servo_sim.csv`), one row
-/// per output (frame-driven and easing) at its time.
+/// per output (frame-driven and easing) at its time; in a take from a port,
+/// one per set of targets its telemetry reported ([`Take::curves`]).
 #[must_use]
 pub fn curves_csv(take: &Take) -> String {
     let mut text = String::from("time_us");
@@ -30,7 +31,7 @@ pub fn curves_csv(take: &Take) -> String {
         let _ = write!(text, ",ch{c}");
     }
     text.push('\n');
-    for (t, _, targets) in take.outputs() {
+    for (t, targets) in take.curves() {
         let _ = write!(text, "{t}");
         for q in targets {
             let _ = write!(text, ",{}", f64::from(q) / 4.0);

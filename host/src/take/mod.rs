@@ -6,9 +6,14 @@
 //! wire message the host sent (tracker frames, parameters, commands), every
 //! reply the board sent (status, acks, telemetry), and every set of servo
 //! targets the board put on its servo link, each with its board-clock time.
-//! The format is specified in `docs/take.md` ([`VERSION`] 1); [`Take::to_bytes`]
-//! writes it and [`Take::parse`] reads it back, refusing a damaged file
-//! with the field and offset at fault.
+//! A take from a board on a serial port ([`Take::of_port`]: `stream`,
+//! `live --port`) holds what the host saw instead: the region it knows (the
+//! rig, and the tables if given), the messages as written at the host's
+//! times, the replies, and the servo targets the board reported in its
+//! telemetry ([`EventKind::Reported`]; its servo link is not seen).
+//! The format is specified in `docs/take.md` (versions 1 and [`VERSION`]
+//! 2); [`Take::to_bytes`] writes it and [`Take::parse`] reads it back,
+//! refusing a damaged file with the field and offset at fault.
 //!
 //! Times: a sent message carries the time it was (or is to be) sent; an
 //! output carries the board clock of the step that produced it (the
@@ -29,8 +34,10 @@ use std::path::Path;
 
 /// The take file's magic.
 pub const MAGIC: [u8; 4] = *b"MTAK";
-/// The take format version this host reads and writes.
-pub const VERSION: u16 = 1;
+/// The newest take format version this host reads and writes: version 2
+/// adds event kind 5 ([`EventKind::Reported`]). A take without such events
+/// is written as version 1, byte for byte as before.
+pub const VERSION: u16 = 2;
 /// Bytes of the fixed header (magic .. region length).
 pub const HEADER_LEN: usize = 16;
 /// Bytes of one event's head (kind, time, length).
@@ -49,6 +56,10 @@ pub enum EventKind {
     FrameOutput,
     /// Kind 4: servo targets of an easing step (rest, fail-safe, jog).
     RestOutput,
+    /// Kind 5 (version 2): servo targets the board reported in a
+    /// `Telemetry` (a take from a port, whose servo link is not seen), at
+    /// the time of the tracker frame it reports.
+    Reported,
 }
 
 impl EventKind {
@@ -60,22 +71,33 @@ impl EventKind {
             Self::Reply => 2,
             Self::FrameOutput => 3,
             Self::RestOutput => 4,
+            Self::Reported => 5,
         }
     }
 
-    fn from_code(code: u8) -> Option<Self> {
+    /// The kind of `code` in a take of format `version`.
+    fn from_code(code: u8, version: u16) -> Option<Self> {
         match code {
             1 => Some(Self::Sent),
             2 => Some(Self::Reply),
             3 => Some(Self::FrameOutput),
             4 => Some(Self::RestOutput),
+            5 if version >= 2 => Some(Self::Reported),
             _ => None,
         }
     }
 
-    /// Whether the event is a set of servo targets.
+    /// Whether the event is a set of servo targets (the board's, or
+    /// reported).
     #[must_use]
     pub const fn is_output(self) -> bool {
+        matches!(self, Self::FrameOutput | Self::RestOutput | Self::Reported)
+    }
+
+    /// Whether the event is a set of targets the board put on its servo
+    /// link.
+    #[must_use]
+    pub const fn is_board_output(self) -> bool {
         matches!(self, Self::FrameOutput | Self::RestOutput)
     }
 }
@@ -117,13 +139,23 @@ impl Event {
     /// An output event of `targets`.
     #[must_use]
     pub fn output(time_us: u32, frame: bool, targets: &[u16]) -> Self {
-        Self {
-            time_us,
-            kind: if frame {
+        Self::targets_of(
+            if frame {
                 EventKind::FrameOutput
             } else {
                 EventKind::RestOutput
             },
+            time_us,
+            targets,
+        )
+    }
+
+    /// An event of `kind` holding `targets`.
+    #[must_use]
+    pub fn targets_of(kind: EventKind, time_us: u32, targets: &[u16]) -> Self {
+        Self {
+            time_us,
+            kind,
             data: targets.iter().flat_map(|t| t.to_le_bytes()).collect(),
         }
     }
@@ -159,7 +191,7 @@ pub enum TakeError {
     #[error("not a take: the magic at byte 0 is not \"MTAK\"")]
     Magic,
     /// A version this host does not read.
-    #[error("take format version {0} at byte 4; this marionette reads version {VERSION}")]
+    #[error("take format version {0} at byte 4; this marionette reads versions 1 to {VERSION}")]
     Version(u16),
     /// The CRC does not match.
     #[error("CRC mismatch (stored {stored:#010x}, computed {computed:#010x}): the file is damaged")]
@@ -236,11 +268,22 @@ impl<'b> Cursor<'b> {
 }
 
 impl Take {
+    /// The format version the take is written in: 2 if it holds reported
+    /// targets (kind 5), else 1.
+    #[must_use]
+    pub fn version(&self) -> u16 {
+        if self.events.iter().any(|e| e.kind == EventKind::Reported) {
+            2
+        } else {
+            1
+        }
+    }
+
     /// The take's bytes (docs/take.md).
     pub fn to_bytes(&self) -> Result<Vec<u8>, TakeError> {
         let mut out = Vec::new();
         out.extend_from_slice(&MAGIC);
-        out.extend_from_slice(&VERSION.to_le_bytes());
+        out.extend_from_slice(&self.version().to_le_bytes());
         out.extend_from_slice(&self.channels.to_le_bytes());
         out.extend_from_slice(&self.period_us.to_le_bytes());
         let region_len =
@@ -274,7 +317,7 @@ impl Take {
         let mut c = Cursor { bytes, at: 0 };
         c.take(4, "the magic")?;
         let version = c.u16("the version")?;
-        if version != VERSION {
+        if !(1..=VERSION).contains(&version) {
             return Err(TakeError::Version(version));
         }
         let body_len = bytes.len().checked_sub(4).ok_or(TakeError::Truncated {
@@ -307,7 +350,7 @@ impl Take {
         for index in 0..count {
             let offset = c.at;
             let code = c.take(1, "an event's kind")?[0];
-            let kind = EventKind::from_code(code).ok_or(TakeError::Kind {
+            let kind = EventKind::from_code(code, version).ok_or(TakeError::Kind {
                 index,
                 offset,
                 kind: code,
@@ -419,6 +462,56 @@ impl Take {
         })
     }
 
+    /// A take of a session with a board on a serial port: `written`, every
+    /// message the host wrote at its time (from the last `Hello` before the
+    /// first other message: the handshake's unanswered ones are left out),
+    /// the board's `replies`, and the servo targets each `Telemetry`
+    /// reported, at the time of the tracker frame it reports (padded or cut
+    /// to the rig's channels). `region` is what the host knows of the
+    /// board's flash: the rig, and the tables if given.
+    pub fn of_port(
+        source: &str,
+        region: &[u8],
+        written: &[Sent],
+        replies: &[Message],
+    ) -> Result<Self, PerformError> {
+        let parsed = Region::parse(region);
+        let rig = parsed.rig.as_ref().ok_or(PerformError::NoRig)?;
+        let channels = rig
+            .servos()
+            .iter()
+            .map(|s| usize::from(s.channel) + 1)
+            .max()
+            .unwrap_or(0);
+        let session = from_last_hello(written);
+        let mut events: Vec<Event> = session
+            .iter()
+            .map(|s| Event {
+                time_us: s.time_us,
+                kind: EventKind::Sent,
+                data: s.bytes.clone(),
+            })
+            .collect();
+        let answers = reply_events(session, replies)?;
+        for (m, e) in replies.iter().zip(&answers) {
+            if let Message::Telemetry(t) = m {
+                let mut targets = t.servo_targets.as_slice().to_vec();
+                targets.resize(channels, 0);
+                events.push(Event::targets_of(EventKind::Reported, e.time_us, &targets));
+            }
+        }
+        events.extend(answers);
+        // Stable: at one time, sent before reported before replies.
+        events.sort_by_key(|e| e.time_us);
+        Ok(Self {
+            channels: u16::try_from(channels).unwrap_or(u16::MAX),
+            period_us: rig.frame_period_us(),
+            region: region.to_vec(),
+            source: source.to_string(),
+            events,
+        })
+    }
+
     /// The session the take sent (its `Sent` events, in order).
     #[must_use]
     pub fn session(&self) -> Vec<Sent> {
@@ -432,14 +525,34 @@ impl Take {
             .collect()
     }
 
-    /// Every output (frame-driven and easing, in order) as `(time, frame,
-    /// targets)`.
+    /// Every output the board put on its servo link (frame-driven and
+    /// easing, in order) as `(time, frame, targets)`; none in a take from a
+    /// port.
     #[must_use]
     pub fn outputs(&self) -> Vec<(u32, bool, Vec<u16>)> {
         self.events
             .iter()
-            .filter(|e| e.kind.is_output())
+            .filter(|e| e.kind.is_board_output())
             .map(|e| (e.time_us, e.kind == EventKind::FrameOutput, e.targets()))
+            .collect()
+    }
+
+    /// The servo curves the take holds, as `(time, targets)`: the board's
+    /// outputs if it has them, else the targets its telemetry reported
+    /// (a take from a port).
+    #[must_use]
+    pub fn curves(&self) -> Vec<(u32, Vec<u16>)> {
+        let board = self.events.iter().any(|e| e.kind.is_board_output());
+        self.events
+            .iter()
+            .filter(|e| {
+                if board {
+                    e.kind.is_board_output()
+                } else {
+                    e.kind == EventKind::Reported
+                }
+            })
+            .map(|e| (e.time_us, e.targets()))
             .collect()
     }
 
@@ -489,12 +602,12 @@ impl Take {
             .iter()
             .filter(|m| matches!(m, Message::Telemetry(_)))
             .count();
-        let outputs = self.outputs();
+        let curves = self.curves();
         let ranges_us = (0..usize::from(self.channels))
             .map(|ch| {
-                let values = outputs
+                let values = curves
                     .iter()
-                    .filter_map(|o| o.2.get(ch))
+                    .filter_map(|o| o.1.get(ch))
                     .filter(|&&v| v > 0)
                     .map(|&v| f64::from(v) / 4.0);
                 let (lo, hi) = values.fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
@@ -505,7 +618,7 @@ impl Take {
             .collect();
         let region = Region::parse(&self.region);
         Info {
-            format_version: VERSION,
+            format_version: self.version(),
             source: self.source.clone(),
             rig_hash: region
                 .rig
@@ -522,6 +635,9 @@ impl Take {
             telemetry,
             frame_outputs: self.frame_outputs(),
             rest_outputs: self.count(EventKind::RestOutput),
+            reported_outputs: self.count(EventKind::Reported),
+            servo_link_seen: self.events.iter().any(|e| e.kind.is_board_output())
+                || !self.events.iter().any(|e| e.kind == EventKind::Reported),
             ranges_us,
         }
     }
@@ -557,6 +673,24 @@ fn reply_events(session: &[Sent], replies: &[Message]) -> Result<Vec<Event>, Per
             })
         })
         .collect()
+}
+
+/// `written` from the last `Hello` before its first other message.
+fn from_last_hello(written: &[Sent]) -> &[Sent] {
+    let is_hello = |s: &Sent| {
+        perform::decode_replies(&s.bytes)
+            .iter()
+            .any(|m| matches!(m, Message::Hello(_)))
+    };
+    let first_other = written
+        .iter()
+        .position(|s| !is_hello(s))
+        .unwrap_or(written.len());
+    let last_hello = written
+        .get(..first_other)
+        .and_then(|opening| opening.iter().rposition(is_hello))
+        .unwrap_or(0);
+    written.get(last_hello..).unwrap_or(written)
 }
 
 /// Messages the host sent, by kind.
@@ -603,7 +737,13 @@ pub struct Info {
     pub frame_outputs: usize,
     /// Easing outputs.
     pub rest_outputs: usize,
-    /// Per-channel [min, max] target (µs; quarter-µs ÷ 4, zeros skipped).
+    /// Servo targets reported by telemetry (a take from a port).
+    pub reported_outputs: usize,
+    /// Whether the take holds the board's servo link (false: a take from a
+    /// port, whose curves are the targets its telemetry reported).
+    pub servo_link_seen: bool,
+    /// Per-channel [min, max] target of the curves (µs; quarter-µs ÷ 4,
+    /// zeros skipped).
     pub ranges_us: Vec<[f64; 2]>,
 }
 
@@ -647,6 +787,55 @@ mod tests {
         assert_eq!(Take::parse(&bytes).unwrap(), small());
     }
 
+    /// The example of docs/take.md's version 2: a take from a port, its
+    /// targets reported by telemetry (kind 5).
+    fn from_a_port() -> Take {
+        let mut take = small();
+        take.source = "p".into();
+        take.events[1] = Event::targets_of(EventKind::Reported, 6, &[0x1770, 0x0001]);
+        take
+    }
+
+    #[test]
+    fn a_take_from_a_port_has_the_documented_bytes() {
+        let take = from_a_port();
+        let bytes = take.to_bytes().unwrap();
+        let mut expected: Vec<u8> = vec![
+            b'M', b'T', b'A', b'K', 2, 0, // magic, version 2
+            2, 0, // channels
+            0xE8, 0x03, 0, 0, // period 1000
+            2, 0, 0, 0, 0xAA, 0xBB, // region
+            1, 0, b'p', // source
+            2, 0, 0, 0, // events
+            1, 5, 0, 0, 0, 2, 0, 0x00, 0x01, // sent at 5 µs
+            5, 6, 0, 0, 0, 4, 0, 0x70, 0x17, 0x01, 0x00, // reported at 6 µs
+        ];
+        let crc = crc32(&expected);
+        expected.extend_from_slice(&crc.to_le_bytes());
+        assert_eq!(bytes, expected);
+        let back = Take::parse(&bytes).unwrap();
+        assert_eq!(back, take);
+        assert!(back.outputs().is_empty(), "no servo link seen");
+        assert_eq!(back.curves(), vec![(6, vec![0x1770, 0x0001])]);
+        let info = back.info();
+        assert_eq!((info.format_version, info.reported_outputs), (2, 1));
+        assert!(!info.servo_link_seen);
+        // Kind 5 is version 2's: in a version-1 file it is unknown.
+        let mut v1 = expected.clone();
+        v1[4] = 1;
+        let n = v1.len() - 4;
+        let crc = crc32(&v1[..n]);
+        v1[n..].copy_from_slice(&crc.to_le_bytes());
+        assert_eq!(
+            Take::parse(&v1),
+            Err(TakeError::Kind {
+                index: 1,
+                offset: 34,
+                kind: 5
+            })
+        );
+    }
+
     #[test]
     fn damaged_takes_are_refused_with_the_reason() {
         let bytes = small().to_bytes().unwrap();
@@ -660,9 +849,9 @@ mod tests {
                 assert!(Take::parse(&b).is_err(), "byte {i} bit {bit}");
             }
         }
-        let mut v2 = bytes.clone();
-        v2[4] = 2;
-        assert_eq!(Take::parse(&v2), Err(TakeError::Version(2)));
+        let mut v3 = bytes.clone();
+        v3[4] = 3;
+        assert_eq!(Take::parse(&v3), Err(TakeError::Version(3)));
         assert_eq!(Take::parse(b"MREG\x01\x00"), Err(TakeError::Magic));
     }
 }

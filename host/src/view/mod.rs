@@ -58,7 +58,7 @@ const POLICY: &str = "default-src 'none'; script-src 'unsafe-inline'; \
 #[derive(Debug, thiserror::Error)]
 pub enum ViewError {
     /// The address could not be bound.
-    #[error("--listen {addr}: {source}")]
+    #[error("the view's address {addr}: {source}")]
     Bind {
         /// The address asked for.
         addr: SocketAddr,

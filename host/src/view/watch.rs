@@ -11,6 +11,7 @@ use crate::perform::{self, ServoFormat};
 use crate::qemu::Taps;
 use marionette_core::rig::Rig;
 use marionette_core::wire::{Message, TrackerFrame};
+use std::cell::RefCell;
 use std::time::Instant;
 
 /// A session watched by a view.
@@ -18,6 +19,8 @@ pub struct Watch<'a> {
     view: &'a View,
     scene: Scene<'a>,
     frames: Vec<TrackerFrame>,
+    /// The newest frame offered, when the frames are not known in advance.
+    newest: RefCell<Option<TrackerFrame>>,
     format: ServoFormat,
     start: Instant,
 }
@@ -37,6 +40,7 @@ impl<'a> Watch<'a> {
             view,
             scene: Scene::new(rig, title),
             frames: frames.to_vec(),
+            newest: RefCell::new(None),
             format,
             start: Instant::now(),
         }
@@ -65,8 +69,19 @@ impl<'a> Watch<'a> {
 
     /// Offers the view a real board's state: its recent replies (the
     /// servo targets from its last `Telemetry`), `sent` tracker frames
-    /// sent so far and `drops` dropped by the sender.
-    pub fn replies(&self, recent: &dyn Fn() -> Vec<Message>, sent: usize, drops: u64) {
+    /// offered so far, `drops` dropped by the sender, and the `newest`
+    /// frame offered if the frames were not given to [`Watch::new`] (a
+    /// live source).
+    pub fn replies(
+        &self,
+        recent: &dyn Fn() -> Vec<Message>,
+        sent: usize,
+        drops: u64,
+        newest: Option<&TrackerFrame>,
+    ) {
+        if let Some(f) = newest {
+            *self.newest.borrow_mut() = Some(*f);
+        }
         self.view
             .offer(|| self.compose(&recent(), None, sent, drops));
     }
@@ -108,9 +123,12 @@ impl<'a> Watch<'a> {
             }
         }
         let targets = bus.unwrap_or(telemetry_targets);
+        let newest = *self.newest.borrow();
         self.scene.snapshot(&Reported {
             targets: &targets,
-            frame: done.checked_sub(1).and_then(|i| self.frames.get(i)),
+            frame: newest
+                .as_ref()
+                .or_else(|| done.checked_sub(1).and_then(|i| self.frames.get(i))),
             residuals: &residuals,
             t_s: self.start.elapsed().as_secs_f64(),
             link,

@@ -235,6 +235,51 @@ pub struct Status {
     pub state: State,
     /// Appended in version 2: fail-safe trips since boot.
     pub trips: u32,
+    /// Appended in version 5: the show flashed beside the rig and tables:
+    /// none, ready, playing, or refused and why.
+    pub show: ShowState,
+    /// Appended in version 5: times the board refused its show since boot:
+    /// once at boot when the region's show fails its checks, and once for
+    /// every trigger (`Show { play: true }`, the board's button) refused
+    /// because of it.
+    pub show_refusals: u32,
+}
+
+/// The flashed show, as the board sees it (appended to `Status` in
+/// version 5). Variant order is the wire contract; tags 3 and up say why
+/// the board refused the region's show (it then plays nothing).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ShowState {
+    /// Tag 0: the region holds no show (or the board has no rig to play
+    /// one on).
+    #[default]
+    None,
+    /// Tag 1: a valid show for the rig, not playing.
+    Ready,
+    /// Tag 2: playing.
+    Playing,
+    /// Tag 3: refused: shorter than its header and tables say.
+    Truncated,
+    /// Tag 4: refused: not a show (magic).
+    BadMagic,
+    /// Tag 5: refused: another show format version.
+    BadVersion,
+    /// Tag 6: refused: its CRC does not match.
+    BadCrc,
+    /// Tag 7: refused: a header field out of range.
+    BadHeader,
+    /// Tag 8: refused: a channel's keys out of order.
+    BadKeys,
+    /// Tag 9: refused: built for another rig.
+    RigMismatch,
+}
+
+impl ShowState {
+    /// Whether the board refused its show.
+    #[must_use]
+    pub const fn is_refused(self) -> bool {
+        !matches!(self, Self::None | Self::Ready | Self::Playing)
+    }
 }
 
 /// The board's state (appended to `Status` and `Telemetry` in version 2).

@@ -1,6 +1,6 @@
 //! The serial wire protocol between the host and the board.
 //!
-//! # Specification (protocol version 3)
+//! # Specification (protocol version 5)
 //!
 //! This is the whole contract: a host can be written from it alone. The
 //! board's behaviour (states, replies, fail-safe) is in
@@ -82,7 +82,7 @@
 //! | 1 | [`TrackerFrame`] | host → board | `seq: u32, time_us: u32, sensors: List<Sensor, 16>` |
 //! | 2 | [`Params`] | host → board | `seq: u32, values: List<f32, 6>` |
 //! | 3 | [`Command`] | host → board | `seq: u32, kind: CommandKind` |
-//! | 4 | [`Status`] | board → host | `protocol_version: u16, armed: bool, table_ok: bool, reason: StatusReason, errors: ErrorCounters, frames_ok: u32`; v2 appends `request_seq: Option<u32>, state: State, trips: u32` |
+//! | 4 | [`Status`] | board → host | `protocol_version: u16, armed: bool, table_ok: bool, reason: StatusReason, errors: ErrorCounters, frames_ok: u32`; v2 appends `request_seq: Option<u32>, state: State, trips: u32`; v5 appends `show: ShowState, show_refusals: u32` |
 //! | 5 | [`Telemetry`] | board → host | `seq: u32, servo_targets: List<u16, 24>, goal_residuals: List<f32, 8>, stage_counts: [u32; 6], errors: ErrorCounters`; v2 appends `state: State, trips: u32, last_trip: Trip, timing: FrameTiming` |
 //! | 6 | [`Ack`] | board → host | `seq: u32, ok: bool` |
 //! | 7 | [`CompactFrame`] (v2) | host → board | `seq16: [u8; 2], time24: [u8; 3], sensors: List<[u8; 11], 16>`: a tracker frame quantized, specified in [`compact`] |
@@ -103,6 +103,10 @@
 //! - `Option<u32>`: `00` for `None`, `01` then the varint for `Some`.
 //! - [`State`]: 0 `Unready` (cannot arm: see `reason`), 1 `Disarmed`,
 //!   2 `Armed`, 3 `FailSafe` (armed, tracker silent past the time-out).
+//! - [`ShowState`] (v5): 0 `None` (no show in the region), 1 `Ready`,
+//!   2 `Playing`; the region's show refused (the board plays nothing):
+//!   3 `Truncated`, 4 `BadMagic`, 5 `BadVersion` (show format), 6 `BadCrc`,
+//!   7 `BadHeader`, 8 `BadKeys`, 9 `RigMismatch` (built for another rig).
 //! - [`Trip`]: `seq: u32, ticks: u32`; [`FrameTiming`]: `frames, mean,
 //!   worst, overruns, budget`, five `u32`.
 //! - `stage_counts`: decode, map, synth, solve, servo, total, in the
@@ -110,7 +114,7 @@
 //! - `servo_targets` are in quarter-microseconds (Maestro units).
 //!
 //! Largest payloads: `TrackerFrame` with 16 sensors and 5-byte varints
-//! 1 + 5 + 5 + 1 + 16 × 29 = 476 bytes; `Telemetry` 223; `Status` 64;
+//! 1 + 5 + 5 + 1 + 16 × 29 = 476 bytes; `Telemetry` 223; `Status` 70;
 //! `CompactFrame` 7 + 16 × 11 = 183.
 //!
 //! ### Calibration: `Jog`
@@ -144,6 +148,10 @@
 //!   would be `Ok` but for a protocol mismatch).
 //! - `Status.reason` is `ProtocolMismatch` only while the last `Hello` was
 //!   refused; an accepted `Hello` clears it.
+//! - `Status.show` (v5): the flashed show; a refused one (tags 3 and up)
+//!   is never played, and `Status.show_refusals` counts the refusals since
+//!   boot: 1 at boot, plus 1 for every trigger refused because of it (a
+//!   `Show { play: true }`, answered `Ack { ok: false }`, or the button).
 //! - `Telemetry.seq`: the sequence number of the tracker frame whose
 //!   outputs it reports. Telemetry goes out after every 10th **performed**
 //!   frame (armed; frames taken while disarmed do not count) and after the
@@ -185,7 +193,7 @@
 //!
 //! ## Versioning
 //!
-//! [`PROTOCOL_VERSION`] is 4. The host opens a session with `Hello`; the board
+//! [`PROTOCOL_VERSION`] is 5. The host opens a session with `Hello`; the board
 //! answers with a `Status` carrying its own version. A board accepts a host
 //! version from [`MIN_PROTOCOL_VERSION`] (1) to its own; on any other it
 //! counts a `version` error, disarms, reports `reason = ProtocolMismatch`,
@@ -217,6 +225,12 @@
 //! or stop the show flashed beside the rig and tables), on the same terms:
 //! a board keeps accepting version-1 to version-3 hosts, and a version-3
 //! board refuses a version-4 `Hello`.
+//!
+//! Version 5 only **appended** two fields to the board's `Status`
+//! (`show: ShowState, show_refusals: u32`: the flashed show, and why and
+//! how often the board refused it). Every host message keeps its bytes, so
+//! a board keeps accepting version-1 to version-4 hosts; their `Status`
+//! replies are longer, read as for version 2 above.
 //!
 //! ## Worked example
 //!
@@ -272,7 +286,7 @@ pub use error::{ErrorCounters, WireError};
 pub use list::List;
 pub use message::{
     Ack, Command, CommandKind, Direction, FrameTiming, Hello, MAX_GOALS, MAX_PARAMS, MAX_SENSORS,
-    MAX_SERVOS, Message, Params, STAGES, Sensor, State, Status, StatusReason, Telemetry,
+    MAX_SERVOS, Message, Params, STAGES, Sensor, ShowState, State, Status, StatusReason, Telemetry,
     TrackerFrame, Trip,
 };
 pub use reader::FrameReader;
@@ -287,7 +301,7 @@ use crate::crc::{Crc32, crc32};
 use postcard::ser_flavors::Flavor;
 
 /// The protocol version this crate speaks.
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 /// The oldest host version a board accepts: every version-1 host message is
 /// a valid version-2 message (see [Versioning](self#versioning)).
 pub const MIN_PROTOCOL_VERSION: u16 = 1;
