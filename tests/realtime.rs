@@ -27,6 +27,13 @@ fn repo() -> PathBuf {
 /// the first frame.
 const BUDGET: u32 = 40_000;
 
+/// About the least budget at which the bundled rig's solver plans one
+/// iteration a frame (the fixed part of a warm solve is about 9,000 of the
+/// cost model, an iteration 19,000 more with a rejection reserved): the
+/// loop's own budget once the rest of a 1 kHz frame fits 30,600
+/// instructions.
+const TIGHT: u32 = 30_000;
+
 /// No limit.
 const FREE: Option<Budget> = Some(Budget::uniform(u32::MAX));
 
@@ -148,7 +155,7 @@ fn follow(held: &[Step], free: &[Step]) -> Follow {
     assert_eq!(held.len(), free.len());
     for s in held {
         assert!(
-            s.solve.work <= s.solve.budget || s.solve.iterations == 0,
+            s.solve.work <= s.solve.budget,
             "frame {}: {:?}",
             s.seq,
             s.solve
@@ -176,7 +183,7 @@ fn goals_converge_over_frames_within_a_budget() {
     assert!(free[0].solve.iterations >= 5, "{:?}", free[0].solve);
     for (name, budget) in [
         ("40,000", Some(Budget::uniform(BUDGET))),
-        ("the loop's own", None),
+        ("30,000", Some(Budget::uniform(TIGHT))),
     ] {
         let held = native(&inputs.region, &inputs.session, budget);
         let f = follow(&held, &free);
@@ -225,12 +232,7 @@ fn every_frame_keeps_the_solvers_budget_on_the_emulated_board() {
         for (m, c) in measured.iter().zip(&counted) {
             assert_eq!(m.seq, c.seq);
             let (work, kind) = (c.solve.work, usize::from(c.adjusted));
-            assert!(
-                work <= c.solve.budget || c.solve.iterations == 0,
-                "frame {}: {:?}",
-                m.seq,
-                c.solve
-            );
+            assert!(work <= c.solve.budget, "frame {}: {:?}", m.seq, c.solve);
             // Everything but the solver's counted work fits the reserve, so
             // a frame takes at most the reserve and the solver's budget.
             let rest = m.total - f64::from(work);
@@ -244,7 +246,7 @@ fn every_frame_keeps_the_solvers_budget_on_the_emulated_board() {
             worst = worst.max(m.total);
             // No frame takes longer than its reserve and its solver's
             // budget.
-            let bound = reserve[kind] + c.solve.budget.max(work);
+            let bound = reserve[kind] + c.solve.budget;
             assert!(
                 m.total <= f64::from(bound),
                 "frame {}: {:.0} instructions, bound {bound}",
@@ -256,13 +258,24 @@ fn every_frame_keeps_the_solvers_budget_on_the_emulated_board() {
             }
         }
         let mean = measured.iter().map(|m| m.total).sum::<f64>() / measured.len() as f64;
+        let iterated = counted.iter().filter(|c| c.solve.iterations > 0).count();
+        let skipped = counted.iter().filter(|c| c.solve.work == 0).count();
         println!(
             "solver budget {budget:?}: frame mean {mean:.0}, worst {worst:.0} instructions; \
              {over} frames over the period (1 kHz at {} MHz, {:.2} cycles per instruction: \
-             {frame})",
+             {frame}); the solver iterated on {iterated} frames, did not run on {skipped}",
             deadline::CLOCK_HZ / 1_000_000,
             f64::from(deadline::CPI_PERCENT) / 100.0
         );
+        // With the loop's own budget, no frame exceeds the period's
+        // instructions: at the cycles per instruction of
+        // `deadline::CPI_PERCENT` (the realistic model of
+        // `../shared/tools/cycles` on the bench's frames, see README's
+        // "Real time"), no frame exceeds the period.
+        if budget.is_none() {
+            assert_eq!(over, 0, "worst {worst:.0}, period {frame}");
+            assert!(worst <= f64::from(frame));
+        }
     }
     println!(
         "the rest of the frame: worst {:.0} plain, {:.0} adjusted instructions; reserve {reserve:?}",

@@ -123,7 +123,7 @@ fn perform<B: Board>(board: &mut B, performer: &mut BoardPerformer<'_, '_>) -> O
         while !input.is_empty() {
             let now = board.now_us();
             let update = performer.receive(&mut input, now, &mut BoardCycles(board));
-            if let Err(outcome) = emit(board, performer, update, &mut pending) {
+            if let Err(outcome) = emit(board, performer, &update, &mut pending) {
                 return outcome;
             }
         }
@@ -131,7 +131,7 @@ fn perform<B: Board>(board: &mut B, performer: &mut BoardPerformer<'_, '_>) -> O
         if now.wrapping_sub(last_tick) >= period {
             last_tick = now;
             let update = performer.tick(now);
-            if let Err(outcome) = emit(board, performer, update, &mut pending) {
+            if let Err(outcome) = emit(board, performer, &update, &mut pending) {
                 return outcome;
             }
         }
@@ -145,16 +145,17 @@ fn perform<B: Board>(board: &mut B, performer: &mut BoardPerformer<'_, '_>) -> O
 }
 
 /// Sends an update's reply, and its servo targets as soon as the servo
-/// outputs can take them ([`Board::servos_ready`]).
+/// outputs can take them ([`Board::servos_ready`]). By reference: an
+/// update is hundreds of bytes, and a move of one a copy per frame.
 fn emit<B: Board>(
     board: &mut B,
     performer: &BoardPerformer<'_, '_>,
-    update: Update,
+    update: &Update,
     pending: &mut bool,
 ) -> Result<(), Outcome> {
-    if let Some(reply) = update.reply {
+    if let Some(reply) = &update.reply {
         let (tracker, _) = board.links();
-        send(tracker, &reply)?;
+        send(tracker, reply)?;
     }
     if update.outputs.is_some() {
         *pending = true;

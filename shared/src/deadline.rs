@@ -22,17 +22,18 @@
 //! frame  = frame_period_us × CLOCK_HZ / 10⁶ cycles × 100 / CPI_PERCENT instructions
 //! solver = frame − RESERVE_BASE − RESERVE_PER_SEGMENT × segments
 //!          (− ADJUSTED_PER_SEGMENT × segments when the synthesis had to adjust
-//!           the parameters, which it knows before the solve),
-//!          at least MIN_SOLVE_BUDGET
+//!           the parameters, which it knows before the solve), at least 0
 //! ```
 //!
-//! The floor is a choice: below it the solver cannot take one step on a
-//! rig like `humanoid16`, and a loop that never moves the goals is no
-//! loop. Where the rest of the frame leaves less (today `humanoid16` at
-//! 1 kHz: its synthesis takes 25 to 40 k instructions), a frame may run
-//! over its period by up to the difference, and the board counts it in
-//! `Telemetry`'s overruns; the frame is still bounded, by the reserve and
-//! the floor.
+//! The budget is a ceiling, never a floor: the solver starts no iteration
+//! whose counted cost does not fit what is left of it, and a frame whose
+//! budget does not even cover the solve's fixed part (the checks, the first
+//! forward kinematics, the final pose) does not solve at all
+//! ([`SolveError::Budget`](crate::solve::SolveError::Budget)): it drives its
+//! warm start, the synthesized pose plus the correction carried from the
+//! last solve, and the correction waits for the next frame (see
+//! [`crate::frame`]). So a frame takes at most the reserve and the budget:
+//! the rig's frame period, at the assumed cycles per instruction.
 //!
 //! Every input is the rig's or a constant, so the board, the emulated board
 //! and the host's native replay take the same decisions and their outputs
@@ -53,32 +54,29 @@
 pub const CLOCK_HZ: u32 = 100_000_000;
 
 /// Cycles per instruction the budget assumes, in hundredths: the realistic
-/// model of the project's cycle estimator (Cortex-M4 timings, 3 flash wait
-/// states and the ART accelerator) gives 1.5 to 1.65 per stage of the live
-/// loop and 1.65 for a whole frame. It does not model interrupts or bus
-/// contention: a board's DWT counts (`Telemetry`'s timing) settle it.
-pub const CPI_PERCENT: u32 = 165;
+/// model of the project's cycle estimator (`../shared/tools/cycles`:
+/// Cortex-M4 timings, 3 flash wait states and the ART accelerator) gives
+/// 1.37 to 1.73 per stage of the live loop and 1.65 to 1.68 for a whole
+/// frame (the mean, the worst and the cold one; README, "Real time"): the
+/// largest, rounded up. It does not model interrupts or bus contention: a
+/// board's DWT counts (`Telemetry`'s timing) settle it.
+pub const CPI_PERCENT: u32 = 168;
 
 /// Instructions of the stages around the solver that do not grow with the
 /// rig's segments: receiving and decoding a frame, the sensor map, the
 /// servo map, the loop's own work and the solver's besides its counted
-/// work (worst measured: 10.7 k).
+/// work.
 pub const RESERVE_BASE: u32 = 11_000;
 
 /// Instructions of the synthesis per segment of the rig when it uses the
-/// parameters as given (worst measured: 24.8 k for `humanoid16`'s 13
-/// segments).
-pub const RESERVE_PER_SEGMENT: u32 = 1_950;
+/// parameters as given (with [`RESERVE_BASE`], the worst rest of a frame
+/// measured by `tests/realtime.rs`: 33.6 k for `humanoid16`'s 13 segments).
+pub const RESERVE_PER_SEGMENT: u32 = 1_800;
 
 /// More instructions of the synthesis per segment when it had to clamp or
-/// project the parameters into the table (worst measured: 40.1 k for
-/// `humanoid16`'s 13 segments).
-pub const ADJUSTED_PER_SEGMENT: u32 = 1_150;
-
-/// The least budget the solver gets, whatever the rest of the frame
-/// takes: one iteration of the whole-tree solver on `humanoid16`'s four
-/// goals with its fixed part (20 to 27 k by the cost model).
-pub const MIN_SOLVE_BUDGET: u32 = 30_000;
+/// project the parameters into the table (the worst rest of such a frame
+/// measured: 48.4 k for `humanoid16`'s 13 segments).
+pub const ADJUSTED_PER_SEGMENT: u32 = 1_120;
 
 /// The solver's work per frame, in the units of
 /// [`Report::work`](crate::solve::Report::work): one for a frame whose
@@ -146,15 +144,10 @@ pub const fn reserve(segments: usize, adjusted: bool) -> u32 {
 
 /// The solver's budget for one frame, in the units of
 /// [`Report::work`](crate::solve::Report::work): a frame's instructions less
-/// the [`reserve`], at least [`MIN_SOLVE_BUDGET`].
+/// the [`reserve`] (0 if the reserve takes the whole frame).
 #[must_use]
 pub const fn solve_budget(period_us: u32, clock_hz: u32, segments: usize, adjusted: bool) -> u32 {
-    let left = frame_instructions(period_us, clock_hz).saturating_sub(reserve(segments, adjusted));
-    if left > MIN_SOLVE_BUDGET {
-        left
-    } else {
-        MIN_SOLVE_BUDGET
-    }
+    frame_instructions(period_us, clock_hz).saturating_sub(reserve(segments, adjusted))
 }
 
 #[cfg(test)]
@@ -162,21 +155,23 @@ mod tests {
     use super::*;
 
     #[test]
-    fn one_millisecond_at_100_mhz_is_60606_instructions() {
-        // 100,000 cycles / 1.65 = 60,606.06.
-        assert_eq!(frame_instructions(1000, 100_000_000), 60_606);
-        assert_eq!(frame_instructions(2000, 100_000_000), 121_212);
+    fn one_millisecond_at_100_mhz_is_59523_instructions() {
+        // 100,000 cycles / 1.68 = 59,523.8.
+        assert_eq!(frame_instructions(1000, 100_000_000), 59_523);
+        assert_eq!(frame_instructions(2000, 100_000_000), 119_047);
         assert_eq!(frame_instructions(u32::MAX, u32::MAX), u32::MAX);
-        assert_eq!(reserve(13, false), 11_000 + 13 * 1_950);
-        assert_eq!(reserve(13, true), 11_000 + 13 * 3_100);
-        // humanoid16 at 1 kHz: the floor.
+        assert_eq!(reserve(13, false), 11_000 + 13 * 1_800);
+        assert_eq!(reserve(13, true), 11_000 + 13 * 2_920);
+        // humanoid16 at 1 kHz: the period less the reserve, no floor.
         let b = Budget::for_rig(1000, CLOCK_HZ, 13);
-        assert_eq!(b.get(false), MIN_SOLVE_BUDGET);
-        assert_eq!(b.get(true), MIN_SOLVE_BUDGET);
+        assert_eq!(b.get(false), 59_523 - 34_400);
+        assert_eq!(b.get(true), 59_523 - 48_960);
+        // A reserve beyond the period leaves nothing.
+        assert_eq!(solve_budget(100, CLOCK_HZ, 13, true), 0);
         // At 500 Hz: the period less the reserve.
         let b = Budget::for_rig(2000, CLOCK_HZ, 13);
-        assert_eq!(b.get(false), 121_212 - 36_350);
-        assert_eq!(b.get(true), 121_212 - 51_300);
+        assert_eq!(b.get(false), 119_047 - 34_400);
+        assert_eq!(b.get(true), 119_047 - 48_960);
         assert_eq!(Budget::uniform(7).get(true), 7);
     }
 }

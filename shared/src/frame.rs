@@ -31,7 +31,10 @@
 //!   and joint layout are rebuilt only when the active goals change) and
 //!   never leaves a joint limit. It works within a budget per frame
 //!   ([`crate::deadline`]): what it cannot finish in one frame, the
-//!   correction carries into the next.
+//!   correction carries into the next. A frame whose budget does not cover
+//!   a solve's fixed part does not solve: it drives the start (synthesized
+//!   plus correction) and keeps the correction; the world pose
+//!   ([`Pipeline::pose`]) and the residuals are then the last solve's.
 //! - **servo**: each servo follows one joint angle through its calibration
 //!   and a [`Slew`] limiter, so no pulse leaves its calibrated range or moves
 //!   faster than the servo's speed and acceleration limits.
@@ -116,7 +119,7 @@ pub use crate::region::Region;
 use crate::rig::{Idle, MAX_PARAMS, Rig};
 use crate::servo::{Slew, quarter_us};
 use crate::show::{Cursor as ShowCursor, Show};
-use crate::solve::{self, Solver, SolverState};
+use crate::solve::{self, SolveError, Solver, SolverState};
 use crate::table::{Kind, Table};
 use crate::wire::{List, MAX_GOALS, MAX_SENSORS, MAX_SERVOS, STAGES, Sensor, ValidTrackerFrame};
 use glam::Quat;
@@ -212,8 +215,9 @@ impl<const N: usize> Correction<N> {
 
     /// Turns the synthesized `angles` into the solver's start: adds the
     /// correction, if one is held, on the joints the active goals hang
-    /// from, then clamps into the joint limits. Keeps the synthesized
-    /// angles for [`Correction::finish`].
+    /// from (the solver clamps them into the joint limits; a frame that
+    /// does not solve clamps them itself). Keeps the synthesized angles for
+    /// [`Correction::finish`].
     fn start(&mut self, body: &Body<'_>, goals: &GoalSet<MAX_GOALS>, angles: &mut Angles<N>) {
         let mut pulled = [false; N];
         if self.held {
@@ -252,9 +256,6 @@ impl<const N: usize> Correction<N> {
         }
         self.root_shift = position;
         self.root_turn = rotation;
-        if any {
-            angles.clamp_to_limits(body);
-        }
     }
 
     /// After a successful solve from [`Correction::start`]: holds
@@ -322,22 +323,21 @@ impl LayerState {
     }
 }
 
-/// One layer's pose at `params` into `out`: a grid query, or for a clip
-/// table the pose at the playhead after advancing it by `dt` (the frame's
-/// step times the layer's rate). Returns what
+/// One layer's pose at `params` into `out`: a grid query (into `query`), or
+/// for a clip table the pose at the playhead after advancing it by `dt` (the
+/// frame's step times the layer's rate). Returns what
 /// the parameter query did, `None` if synthesis failed.
 fn layer_pose<const N: usize>(
     table: &Table<'_>,
     params: &[f32],
     state: &mut LayerState,
     dt: f32,
-    out: &mut Pose<N>,
+    (query, out): (&mut Query, &mut Pose<N>),
 ) -> Option<Adjust> {
     let grid = table.grid().ok()?;
     match table.kind() {
         Kind::Grid => {
-            let mut query = Query::default();
-            grid.query_into(params, &mut query).ok()?;
+            grid.query_into(params, query).ok()?;
             query.pose(table, out).ok()?;
             Some(query.adjust())
         }
@@ -408,6 +408,9 @@ pub struct Pipeline<'r, 'a, const N: usize = MAX_SEGMENTS> {
     angles: Angles<N>,
     warm: Correction<N>,
     synth: Pose<N>,
+    /// The grid query of the last frame's synthesis (kept: see
+    /// [`Grid::query_into`]).
+    query: Query,
     pose: Pose<N>,
     local: LocalPose<N>,
     /// What the solver built for the last frame's goals (reach tree, joint
@@ -424,7 +427,8 @@ pub struct Pipeline<'r, 'a, const N: usize = MAX_SEGMENTS> {
     step_dt: Option<f32>,
     targets: [u16; MAX_SERVOS],
     channels: usize,
-    residuals: [f32; MAX_GOALS],
+    /// The last solve's report, written in place.
+    report: solve::Report<MAX_GOALS>,
     adjusted: u32,
     failed_frames: u32,
 }
@@ -486,6 +490,7 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             angles,
             warm: Correction::NONE,
             synth: Pose::default(),
+            query: Query::default(),
             pose: *rig.rest_pose(),
             local: LocalPose::default(),
             solver,
@@ -496,7 +501,7 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             step_dt: None,
             targets,
             channels,
-            residuals: [0.0; MAX_GOALS],
+            report: solve::Report::EMPTY,
             adjusted: 0,
             failed_frames: 0,
         })
@@ -563,7 +568,8 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         &self.angles
     }
 
-    /// The current world pose of the figure (solved, or rest).
+    /// The world pose of the last solve (or rest): a frame whose budget did
+    /// not cover a solve keeps it (see [the solve stage](self)).
     #[must_use]
     pub fn pose(&self) -> &Pose<N> {
         &self.pose
@@ -572,7 +578,8 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
     /// The remaining distance to each active goal after the last solve, m.
     #[must_use]
     pub fn residuals(&self) -> &[f32] {
-        self.residuals
+        self.report
+            .residuals
             .get(..self.goals.as_slice().len())
             .unwrap_or(&[])
     }
@@ -829,9 +836,10 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         let Some(params) = self.params.get(..n) else {
             return false;
         };
-        // Filled in place: a query is a few hundred bytes.
-        let mut query = Query::default();
-        if grid.query_into(params, &mut query).is_err() {
+        // Kept and filled in place: a query is a few hundred bytes, and a
+        // new one a clear and a copy of them every frame.
+        let query = &mut self.query;
+        if grid.query_into(params, query).is_err() {
             return false;
         }
         self.adjusted_now = query.adjust() != Adjust::None;
@@ -873,7 +881,8 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             };
             state.fade_to(target, layer.fade_s, dt);
             let step = dt * layer.rate_at(&self.params, time);
-            let Some(adjust) = layer_pose(table, params, state, step, &mut self.synth) else {
+            let out = (&mut self.query, &mut self.synth);
+            let Some(adjust) = layer_pose(table, params, state, step, out) else {
                 return false;
             };
             adjusted |= adjust != Adjust::None;
@@ -900,23 +909,35 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         let body: Body<'_> = self.rig.body();
         self.warm.start(&body, &self.goals, &mut self.angles);
         let budget = self.budget.get(self.adjusted_now);
-        match solve::solve_with(
+        match solve::solve_into(
             &SOLVER.with_budget(budget),
             &body,
             &self.goals,
             &mut self.angles,
             &mut self.pose,
             self.solver,
+            &mut self.report,
         ) {
-            Ok(report) => {
-                for (r, x) in self.residuals.iter_mut().zip(report.residuals.iter()) {
-                    *r = *x;
-                }
+            Ok(()) => {
+                let report = &self.report;
                 self.last_solve = SolveStats {
                     iterations: report.iterations,
                     work: report.work,
                     budget,
                     converged: report.converged,
+                };
+                self.warm.finish(&self.angles);
+                true
+            }
+            Err(SolveError::Budget) => {
+                // Not even the solve's fixed part fits this frame: drive
+                // the warm start and carry the correction on.
+                self.angles.clamp_to_limits(&body);
+                self.last_solve = SolveStats {
+                    iterations: 0,
+                    work: 0,
+                    budget,
+                    converged: false,
                 };
                 self.warm.finish(&self.angles);
                 true

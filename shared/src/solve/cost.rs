@@ -28,8 +28,10 @@
 //! kinematics, and going back if the trial is rejected, are always
 //! reserved. The fixed part of a solve (the checks, the joint layout if it
 //! is new, the first forward kinematics, the final pose and the report) is
-//! counted first and always done: a budget below it still gives a pose,
-//! without iterations.
+//! counted first: a budget below it (by the model, a bound when the layout
+//! is new) is refused before any work
+//! ([`SolveError::Budget`](super::SolveError::Budget)), so the count never
+//! exceeds the budget.
 //!
 //! The coefficients were fitted (a linear program: the smallest total
 //! relative excess with every solve bounded) to the instruction counts of

@@ -466,6 +466,12 @@ impl<const N: usize> Joints<N> {
     }
 }
 
+/// Segment `s` and its ancestors, up to the root.
+pub(super) fn ancestors<'a>(body: &'a Body<'_>, s: usize) -> impl Iterator<Item = usize> + 'a {
+    // Parents come before children (checked): the climb ends.
+    core::iter::successors(Some(s), |&s| body.parent(s).filter(|&p| p < s))
+}
+
 /// Adds the slot bits `(point, frame)` to the entries of `moves` of segment
 /// `s` and of its ancestors; returns the segments visited.
 fn climb<const N: usize>(
@@ -474,15 +480,12 @@ fn climb<const N: usize>(
     (point, frame): (u16, u16),
     moves: &mut [(u16, u16); N],
 ) -> usize {
-    let mut at = Some(s);
     let mut steps = 0;
-    while let Some(s) = at {
+    for s in ancestors(body, s) {
         if let Some(d) = moves.get_mut(s) {
             (d.0, d.1) = (d.0 | point, d.1 | frame);
         }
         steps += 1;
-        // Parents come before children (checked): the climb ends.
-        at = body.parent(s).filter(|&p| p < s);
     }
     steps
 }

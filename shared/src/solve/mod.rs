@@ -168,8 +168,9 @@ pub struct Solver {
     pub restarts: u8,
     /// [`Method::TreeDls`]: the most work a solve may do, in the units of
     /// [`Report::work`]; it starts no iteration (or restart) that might take
-    /// it past this, and what is left is for the next solve. `u32::MAX`: no
-    /// limit.
+    /// it past this, and what is left is for the next solve. A budget below
+    /// the solve's fixed part is refused ([`SolveError::Budget`]), so a
+    /// solve's work never exceeds it. `u32::MAX`: no limit.
     pub budget: u32,
 }
 
@@ -257,6 +258,11 @@ pub enum SolveError {
     BadGoal(u8),
     /// [`Method::TreeDls`]: more active goals than [`MAX_GOALS`].
     TooManyGoals,
+    /// [`Method::TreeDls`]: the [`Solver::budget`] does not cover the
+    /// solve's fixed part (the checks, the joint layout if it is new, the
+    /// first forward kinematics and the final pose, by the cost model):
+    /// nothing was done, the angles and the pose are as given.
+    Budget,
 }
 
 impl From<BodyError> for SolveError {
@@ -284,6 +290,19 @@ pub struct Report<const G: usize> {
     /// The units of [`Report::work`] per [`cost::Term`] (to fit the model).
     #[cfg(feature = "cost-terms")]
     pub terms: [u32; cost::TERMS],
+}
+
+impl<const G: usize> Report<G> {
+    /// No solve yet: no iteration, nothing left (every residual 0).
+    pub const EMPTY: Self = Report {
+        iterations: 0,
+        converged: true,
+        residuals: [0.0; G],
+        error: 0.0,
+        work: 0,
+        #[cfg(feature = "cost-terms")]
+        terms: [0; cost::TERMS],
+    };
 }
 
 /// Largest accepted magnitude of any coordinate of an active goal's target
@@ -371,7 +390,17 @@ pub fn solve<const N: usize, const G: usize>(
         tree = ReachTree::EMPTY;
         Kept::Tree(&mut tree)
     };
-    solve_in(solver, body, goals, angles, pose, kept, &mut None)
+    let mut report = Report::EMPTY;
+    solve_in(
+        solver,
+        body,
+        goals,
+        angles,
+        pose,
+        (kept, &mut None),
+        &mut report,
+    )?;
+    Ok(report)
 }
 
 /// [`solve`] with a working state that the caller keeps between solves.
@@ -391,12 +420,30 @@ pub fn solve_with<const N: usize, const G: usize>(
     pose: &mut Pose<N>,
     state: &mut SolverState<N>,
 ) -> Result<Report<G>, SolveError> {
+    let mut report = Report::EMPTY;
+    solve_into(solver, body, goals, angles, pose, state, &mut report)?;
+    Ok(report)
+}
+
+/// [`solve_with`] with the report written in place: a live loop keeps one
+/// (a report is returned by copy otherwise, every frame). After an error,
+/// `report` is unspecified.
+pub fn solve_into<const N: usize, const G: usize>(
+    solver: &Solver,
+    body: &Body<'_>,
+    goals: &GoalSet<G>,
+    angles: &mut Angles<N>,
+    pose: &mut Pose<N>,
+    state: &mut SolverState<N>,
+    report: &mut Report<G>,
+) -> Result<(), SolveError> {
     let kept = if solver.method == Method::TreeDls {
         Kept::Lm(&mut state.lm)
     } else {
         Kept::Tree(&mut state.tree)
     };
-    solve_in(solver, body, goals, angles, pose, kept, &mut state.layout)
+    let state = (kept, &mut state.layout);
+    solve_in(solver, body, goals, angles, pose, state, report)
 }
 
 /// The part of a [`SolverState`] that the solver's method keeps.
@@ -407,7 +454,7 @@ enum Kept<'s, const N: usize> {
     Lm(&'s mut tree::Lm<N>),
 }
 
-/// [`solve_with`] on the part of the state the method keeps (`kept`, built
+/// [`solve_into`] on the part of the state the method keeps (`kept`, built
 /// for `state_layout`).
 fn solve_in<const N: usize, const G: usize>(
     solver: &Solver,
@@ -415,17 +462,25 @@ fn solve_in<const N: usize, const G: usize>(
     goals: &GoalSet<G>,
     angles: &mut Angles<N>,
     pose: &mut Pose<N>,
-    kept: Kept<'_, N>,
-    state_layout: &mut Option<Layout>,
-) -> Result<Report<G>, SolveError> {
+    (kept, state_layout): (Kept<'_, N>, &mut Option<Layout>),
+    report: &mut Report<G>,
+) -> Result<(), SolveError> {
     let mut work = Work::new(body, goals.as_slice(), angles, pose);
     let mut meter = cost::Meter::new(solver.budget);
     meter.add(cost::Term::Solve, 1);
     meter.add(cost::Term::Segment, body.len());
     meter.add(cost::Term::Goal, goals.as_slice().len());
-    work.check()?;
     let layout = Layout::of(solver, body, goals.as_slice());
     let laid_out = layout.is_some() && *state_layout == layout;
+    if let Kept::Lm(lm) = &kept
+        && solver.budget != u32::MAX
+        && lm.fixed_work(laid_out, body, goals.as_slice()) > meter.left()
+    {
+        // Not even the fixed part fits: nothing done, nothing kept
+        // changed.
+        return Err(SolveError::Budget);
+    }
+    work.check()?;
     // Valid again only once this solve has built what it needs.
     *state_layout = None;
     let (iterations, converged, lm) = match kept {
@@ -449,24 +504,26 @@ fn solve_in<const N: usize, const G: usize>(
         }
     };
     *state_layout = layout;
-    let mut report = Report {
-        iterations,
-        converged,
-        residuals: [0.0; G],
-        error: 0.0,
-        work: 0,
-        #[cfg(feature = "cost-terms")]
-        terms: meter.spent().units,
+    (report.iterations, report.converged, report.error) = (iterations, converged, 0.0);
+    report.work = if lm.is_some() {
+        meter.spent().cost()
+    } else {
+        0
     };
-    if lm.is_some() {
-        report.work = meter.spent().cost();
+    #[cfg(feature = "cost-terms")]
+    {
+        report.terms = meter.spent().units;
     }
     // With an active goal, tree DLS leaves every active goal's residual at
     // the final pose in its slots (in goal order): the same numbers as
     // evaluating the goal again.
     let slots = lm.map(|lm| lm.slots());
     let mut kept = slots.into_iter().flat_map(|s| s.iter()).peekable();
-    for ((r, g), i) in report.residuals.iter_mut().zip(goals.as_slice()).zip(0u8..) {
+    for (r, i) in report.residuals.iter_mut().zip(0u8..) {
+        let Some(g) = goals.as_slice().get(usize::from(i)) else {
+            *r = 0.0;
+            continue;
+        };
         let active = g.is_active();
         *r = match kept.next_if(|s| active && s.goal == i) {
             Some(slot) => slot.magnitude(),
@@ -479,7 +536,7 @@ fn solve_in<const N: usize, const G: usize>(
             report.error += g.weight * *r * *r;
         }
     }
-    Ok(report)
+    Ok(())
 }
 
 /// The working state of [`solve_with`], kept by the caller between solves

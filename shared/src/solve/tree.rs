@@ -37,10 +37,12 @@
 //! joints' ranges, and the lowest error wins.
 
 use super::cost::{Meter, Tally, Term};
-use super::joints::Joints;
+use super::joints::{Joints, ancestors};
 use super::slots::{Kind, Rhs, Slots};
 use super::system::System;
 use super::{SolveError, Solver, Work};
+use crate::body::Body;
+use crate::goal::{Frame, Goal, Target};
 use crate::math;
 
 pub use super::slots::MAX_GOALS;
@@ -140,8 +142,7 @@ pub(super) fn solve<const N: usize>(
         .fold(0.0f32, |m, g| math::max(g.weight, m));
     let segments = work.body.len();
     if wmax <= 0.0 {
-        meter.add(Term::Place, segments);
-        meter.add(Term::Turn, 3 * segments);
+        meter.add_tally(&still_work(segments));
         work.forward()?;
         return Ok((0, true));
     }
@@ -150,14 +151,11 @@ pub(super) fn solve<const N: usize>(
     if !laid_out {
         lm.joints.init(solver, work, &lm.slots);
         lm.system.forget(&lm.joints, lm.slots.count);
-        meter.add(Term::Layout, 1);
-        meter.add(Term::LayoutSegment, segments);
-        meter.add(Term::Climb, lm.joints.sizes.climbs);
+        meter.add_tally(&layout_work(segments, lm.joints.sizes.climbs));
     }
     // The final pose of the segments off the path, counted first: it is
     // always made.
-    meter.add(Term::Rest, segments.saturating_sub(lm.joints.path_len()));
-    meter.add(Term::RestDof, lm.joints.sizes.rest_dofs);
+    meter.add_tally(&lm.rest_work(segments));
     let (mut iterations, mut converged) = lm.run(solver, work, meter)?;
     let tol2 = solver.tolerance * solver.tolerance;
     if solver.restarts > 0 && lm.slots.worst > tol2 {
@@ -169,7 +167,77 @@ pub(super) fn solve<const N: usize>(
     Ok((iterations, converged))
 }
 
+/// The work of placing every segment when no goal is active.
+fn still_work(segments: usize) -> Tally {
+    Tally::NONE
+        .with(Term::Place, segments)
+        .with(Term::Turn, 3 * segments)
+}
+
+/// The work of building the joint layout: `climbs` steps of the goals'
+/// climbs to the root.
+fn layout_work(segments: usize, climbs: usize) -> Tally {
+    Tally::NONE
+        .with(Term::Layout, 1)
+        .with(Term::LayoutSegment, segments)
+        .with(Term::Climb, climbs)
+}
+
+/// The work of evaluating the goals: `simple` point goals in the world
+/// frame of `active` ones.
+fn eval_work(active: usize, simple: usize) -> Tally {
+    Tally::NONE
+        .with(Term::EvalPoint, simple)
+        .with(Term::EvalOther, active.saturating_sub(simple))
+}
+
 impl<const N: usize> Lm<N> {
+    /// The most work of a solve's fixed part besides [`Term::Solve`], the
+    /// segments and the goals (which the caller counts): the goals' slots,
+    /// the joint layout unless `laid_out` (the same goals on the same
+    /// segments as the kept joints), the final pose of the segments off
+    /// the path and the first forward kinematics. Exact for a kept layout;
+    /// for a new one a bound (the goals' climbs counted, every segment
+    /// both on the path and off it, with three DOFs).
+    pub(super) fn fixed_work(&self, laid_out: bool, body: &Body<'_>, goals: &[Goal]) -> u32 {
+        let segments = body.len();
+        let (mut active, mut simple, mut climbs) = (0usize, 0usize, 0usize);
+        for g in goals.iter().filter(|g| g.is_active()) {
+            active += 1;
+            if !laid_out {
+                climbs += ancestors(body, usize::from(g.segment)).count();
+            }
+            match (g.target, g.frame) {
+                (Target::Position(_), Frame::World) => simple += 1,
+                (_, Frame::Segment(f)) if !laid_out => {
+                    climbs += ancestors(body, usize::from(f)).count();
+                }
+                _ => {}
+            }
+        }
+        let goals = Tally::NONE
+            .with(Term::Slot, active)
+            .plus(&eval_work(active, simple));
+        let kept = if laid_out {
+            self.rest_work(segments)
+                .with(Term::Place, self.joints.path_len())
+                .with(Term::Turn, self.joints.sizes.dofs)
+        } else {
+            layout_work(segments, climbs)
+                .plus(&still_work(segments))
+                .with(Term::Rest, segments)
+                .with(Term::RestDof, 3 * segments)
+        };
+        still_work(segments).cost().max(kept.plus(&goals).cost())
+    }
+
+    /// The work of the final pose of the segments off the path.
+    fn rest_work(&self, segments: usize) -> Tally {
+        Tally::NONE
+            .with(Term::Rest, segments.saturating_sub(self.joints.path_len()))
+            .with(Term::RestDof, self.joints.sizes.rest_dofs)
+    }
+
     /// Forward kinematics and the goals at the current angles.
     fn refresh(&mut self, work: &mut Work<'_, '_, N>) -> Result<(), SolveError> {
         self.joints.forward(work);
@@ -179,12 +247,10 @@ impl<const N: usize> Lm<N> {
     /// The work of a forward kinematics that may turn joints of `dofs`
     /// DOFs, and of evaluating the goals.
     fn refresh_work(&self, dofs: usize) -> Tally {
-        let simple = self.slots.simple;
         Tally::NONE
             .with(Term::Place, self.joints.path_len())
             .with(Term::Turn, dofs)
-            .with(Term::EvalPoint, simple)
-            .with(Term::EvalOther, self.slots.count.saturating_sub(simple))
+            .plus(&eval_work(self.slots.count, self.slots.simple))
     }
 
     /// Prices the parts of an iteration with the live groups of the last
