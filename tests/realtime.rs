@@ -267,14 +267,24 @@ fn every_frame_keeps_the_solvers_budget_on_the_emulated_board() {
             deadline::CLOCK_HZ / 1_000_000,
             f64::from(deadline::CPI_PERCENT) / 100.0
         );
-        // With the loop's own budget, no frame exceeds the period's
-        // instructions: at the cycles per instruction of
-        // `deadline::CPI_PERCENT` (the realistic model of
-        // `../shared/tools/cycles` on the bench's frames, see README's
-        // "Real time"), no frame exceeds the period.
+        // With the loop's own budget a frame exceeds the period's
+        // instructions (at the cycles per instruction of
+        // `deadline::CPI_PERCENT`, the realistic model of
+        // `../shared/tools/cycles`) only where the solver's floor rules, and
+        // by at most the floor's excess over what the period leaves.
         if budget.is_none() {
-            assert_eq!(over, 0, "worst {worst:.0}, period {frame}");
-            assert!(worst <= f64::from(frame));
+            let excess = (reserve[1] + deadline::MIN_SOLVE_BUDGET).saturating_sub(frame);
+            assert!(worst <= f64::from(frame + excess), "worst {worst:.0}");
+            for (m, c) in measured.iter().zip(&counted) {
+                if m.total > f64::from(frame) {
+                    assert_eq!(
+                        c.solve.budget,
+                        deadline::MIN_SOLVE_BUDGET,
+                        "frame {}",
+                        m.seq
+                    );
+                }
+            }
         }
     }
     println!(
