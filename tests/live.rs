@@ -95,7 +95,7 @@ fn vmc_over_udp_drives_the_emulated_board_as_sim_on_the_recorded_session() {
 
     let args = Args {
         rig: repo().join("rigs/humanoid16.toml"),
-        tables: Some(tables),
+        tables: vec![tables],
         port: None,
         baud: None,
         listen: "127.0.0.1:0".parse().unwrap(),

@@ -48,7 +48,7 @@ fn stream_at_1_khz_over_a_pty_drops_frames_never_stalls_and_matches_sim() {
         out: dir.path().to_path_buf(),
         json: false,
         take: None,
-        tables: None,
+        tables: Vec::new(),
         view: Default::default(),
     };
     let t0 = Instant::now();

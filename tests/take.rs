@@ -366,7 +366,7 @@ fn a_take_from_a_serial_port_holds_the_telemetrys_targets_and_replays() {
         out: dir.path().join("out"),
         json: false,
         take: Some(take_path.clone()),
-        tables: Some(tables),
+        tables: vec![tables],
         view: Default::default(),
     };
     let (summary, _) = stream::stream(&args).expect("stream completes");

@@ -136,7 +136,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 mod layer;
-pub use layer::{Given, LayerSpec, region};
+pub use layer::{Given, LayerSpec, region, region_of_files};
 
 /// A rig-file error: where (file, 1-based line; 0 if unknown), which field,
 /// and what is wrong.

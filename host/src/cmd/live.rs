@@ -61,9 +61,10 @@ pub struct Args {
     pub rig: PathBuf,
     /// The table blob for the emulated board (`marionette demo` writes
     /// `out/reach_humanoid16.bin`); a real board has its own in flash
-    /// (given with `--port`, it is only kept in the take).
+    /// (given with `--port`, it is only kept in the take). Repeat it for a
+    /// rig with `[[layer]]` tables: table 0, 1, … in order.
     #[arg(long)]
-    pub tables: Option<PathBuf>,
+    pub tables: Vec<PathBuf>,
     /// A real board's tracker serial port (default: the emulated board).
     #[arg(long)]
     pub port: Option<String>,
@@ -182,17 +183,16 @@ fn board(args: &Args, rig: &rigfile::RigFile) -> Result<(Board, String, u32), Cm
     if let Some(port) = &args.port {
         return Ok((Board::Real, port.clone(), args.baud.unwrap_or(921_600)));
     }
-    let Some(t) = &args.tables else {
+    if args.tables.is_empty() {
         return Err(
             "the emulated board needs a table blob: --tables out/reach_humanoid16.bin \
                     (written by `marionette demo`), or a real board: --port DEV"
                 .into(),
         );
-    };
-    let tables = std::fs::read(t).map_err(|e| format!("{}: {e}", t.display()))?;
+    }
     std::fs::create_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
     let region = args.out.join("region.bin");
-    let image = perform::region(&rigfile::to_blob(rig)?, Some(&tables));
+    let image = rigfile::region_of_files(rig, &args.tables)?;
     crate::save::save(&region, &image, &[])?;
     let servo = args.out.join("servo_live.bin");
     let elf = qemu::firmware_elf("perform")?;
@@ -414,13 +414,7 @@ pub fn live(
     let emulated = match &mut board {
         Board::Real => {
             if let Some(path) = &args.take {
-                stream::save_port_take(
-                    ("live", path),
-                    &rig_blob,
-                    args.tables.as_deref(),
-                    &written,
-                    &messages,
-                )?;
+                stream::save_port_take(("live", path), &rig, &args.tables, &written, &messages)?;
             }
             None
         }

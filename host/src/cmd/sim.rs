@@ -111,22 +111,10 @@ pub fn load_with(
         ("the recording", recording.to_path_buf()),
     ];
     sources.extend(tables.iter().map(|t| ("the table", t.clone())));
-    let blobs = tables
-        .iter()
-        .map(|t| std::fs::read(t).map_err(|e| format!("{}: {e}", t.display())))
-        .collect::<Result<Vec<_>, _>>()?;
-    let given: Vec<_> = tables
-        .iter()
-        .zip(&blobs)
-        .map(|(t, blob)| rigfile::Given {
-            name: t.display().to_string(),
-            blob,
-        })
-        .collect();
     let samples = import::csv::read_tracker_csv(recording)?;
     let frames = perform::frames(&samples)?;
     Ok(Inputs {
-        region: rigfile::region(&rig, &given)?,
+        region: rigfile::region_of_files(&rig, tables)?,
         session: perform::session_with(&frames, framing)?,
         frames: frames.len(),
         times: frames.iter().map(|f| f.time_us).collect(),

@@ -81,9 +81,9 @@ pub struct Args {
     /// The table blob the board's flash holds, kept in the take with the
     /// rig (so that `replay --emulated`, `take edit` and `take export
     /// --bvh` can run the core on it); without it the take holds the rig
-    /// only.
+    /// only. Repeat it for a rig with `[[layer]]` tables.
     #[arg(long)]
-    pub tables: Option<PathBuf>,
+    pub tables: Vec<PathBuf>,
     /// The live view (`--view`, `--listen`), from the board's telemetry.
     #[command(flatten)]
     pub view: super::view::ViewArgs,
@@ -358,15 +358,12 @@ fn schedule(sender: &Sender, frames: &[TrackerFrame], fast: bool, after: &dyn Fn
 /// ([`crate::take::Take::of_port`]).
 pub fn save_port_take(
     (source, path): (&str, &Path),
-    rig_blob: &[u8],
-    tables: Option<&Path>,
+    rig: &rigfile::RigFile,
+    tables: &[PathBuf],
     written: &[perform::Sent],
     replies: &[Message],
 ) -> Result<(), CmdError> {
-    let tables = tables
-        .map(|t| std::fs::read(t).map_err(|e| format!("{}: {e}", t.display())))
-        .transpose()?;
-    let region = perform::region(rig_blob, tables.as_deref());
+    let region = rigfile::region_of_files(rig, tables)?;
     crate::take::Take::of_port(source, &region, written, replies)?.save(path)?;
     Ok(())
 }
@@ -460,13 +457,7 @@ pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
         return Err(format!("{}: the port failed: {e}", args.port).into());
     }
     if let Some(path) = &args.take {
-        save_port_take(
-            ("stream", path),
-            &rig_blob,
-            args.tables.as_deref(),
-            &written,
-            &messages,
-        )?;
+        save_port_take(("stream", path), &rig, &args.tables, &written, &messages)?;
     }
     let sent_csv = args.out.join("sent.csv");
     write_sent(&sent_csv, &sent)?;

@@ -268,6 +268,32 @@ pub fn region(rig: &RigFile, tables: &[Given<'_>]) -> Result<Vec<u8>, RigFileErr
     write(rig, tables).map_err(|why| at(0, "layer".into(), why))
 }
 
+/// [`region`] of the table blobs in the files `paths` (in order), read
+/// here; an unreadable file is named.
+pub fn region_of_files(
+    rig: &RigFile,
+    paths: &[std::path::PathBuf],
+) -> Result<Vec<u8>, RigFileError> {
+    let blobs = paths
+        .iter()
+        .map(|p| {
+            std::fs::read(p).map_err(|source| RigFileError::Io {
+                file: p.display().to_string(),
+                source,
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let given: Vec<Given<'_>> = paths
+        .iter()
+        .zip(&blobs)
+        .map(|(p, blob)| Given {
+            name: p.display().to_string(),
+            blob,
+        })
+        .collect();
+    region(rig, &given)
+}
+
 /// Lays out the region (after [`region`]'s checks).
 fn write(rig: &RigFile, tables: &[Given<'_>]) -> Result<Vec<u8>, String> {
     let rig_blob = super::to_blob(rig).map_err(|e| e.to_string())?;
