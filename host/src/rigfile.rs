@@ -232,7 +232,7 @@ pub struct RigFile {
     /// `marionette live`'s name map (`[live]`; empty without one).
     pub live: LiveMap,
     /// The layers (`[[layer]]`, in blend order; empty: one table, no
-    /// layers). See [`layer`](self::region).
+    /// layers). See [`region()`].
     pub layers: Vec<LayerSpec>,
 }
 

@@ -268,7 +268,7 @@ pub fn region(rig: &RigFile, tables: &[Given<'_>]) -> Result<Vec<u8>, RigFileErr
     write(rig, tables).map_err(|why| at(0, "layer".into(), why))
 }
 
-/// [`region`] of the table blobs in the files `paths` (in order), read
+/// [`region()`] of the table blobs in the files `paths` (in order), read
 /// here; an unreadable file is named.
 pub fn region_of_files(
     rig: &RigFile,
