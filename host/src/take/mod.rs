@@ -431,14 +431,7 @@ impl Take {
             },
             Vec::len,
         );
-        let mut events: Vec<Event> = session
-            .iter()
-            .map(|s| Event {
-                time_us: s.time_us,
-                kind: EventKind::Sent,
-                data: s.bytes.clone(),
-            })
-            .collect();
+        let mut events = sent_events(session);
         let frames = run.frame_targets.len();
         let mut last = session.last().map_or(0, |s| s.time_us);
         for (k, targets) in outputs.iter().enumerate() {
@@ -484,14 +477,7 @@ impl Take {
             .max()
             .unwrap_or(0);
         let session = from_last_hello(written);
-        let mut events: Vec<Event> = session
-            .iter()
-            .map(|s| Event {
-                time_us: s.time_us,
-                kind: EventKind::Sent,
-                data: s.bytes.clone(),
-            })
-            .collect();
+        let mut events = sent_events(session);
         let answers = reply_events(session, replies)?;
         for (m, e) in replies.iter().zip(&answers) {
             if let Message::Telemetry(t) = m {
@@ -745,6 +731,18 @@ pub struct Info {
     /// Per-channel [min, max] target of the curves (µs; quarter-µs ÷ 4,
     /// zeros skipped).
     pub ranges_us: Vec<[f64; 2]>,
+}
+
+/// One `Sent` event per message of `session`, at its time.
+fn sent_events(session: &[Sent]) -> Vec<Event> {
+    session
+        .iter()
+        .map(|s| Event {
+            time_us: s.time_us,
+            kind: EventKind::Sent,
+            data: s.bytes.clone(),
+        })
+        .collect()
 }
 
 #[cfg(test)]
