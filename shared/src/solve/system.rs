@@ -220,7 +220,7 @@ impl System {
             let links = links_of(links, g);
             outer(&mut self.a, links, self.awake, d.inv_d);
             if !known {
-                couple(&mut self.coupled, links, self.awake);
+                couple(&mut self.coupled, g.dep_a | g.dep_b, self.awake);
             }
         }
         if !known {
@@ -375,16 +375,18 @@ fn spread<const N: usize>(
     clamped
 }
 
-/// Marks the blocks that a group's links to awake slots make nonzero.
-fn couple(coupled: &mut Coupling, links: &[Link], awake: u16) {
-    let mask = links
-        .iter()
-        .filter(|l| awake >> l.slot & 1 != 0)
-        .fold(0u16, |m, l| m | 1 << l.slot);
-    for l in links.iter().filter(|l| awake >> l.slot & 1 != 0) {
-        if let Some(c) = coupled.get_mut(usize::from(l.slot)) {
+/// Marks the blocks that a group moving the slots `moves` makes nonzero
+/// among the awake ones (a live group has a link to every slot it moves).
+#[inline]
+fn couple(coupled: &mut Coupling, moves: u16, awake: u16) {
+    let mask = moves & awake;
+    let mut bits = mask;
+    while bits != 0 {
+        let t = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        if let Some(c) = coupled.get_mut(t) {
             // The lower triangle: slots up to this one.
-            *c |= mask & ((2u16 << l.slot) - 1);
+            *c |= mask & ((2u16 << t) - 1);
         }
     }
 }
