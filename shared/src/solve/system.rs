@@ -377,7 +377,9 @@ fn spread<const N: usize>(
 
 /// Marks the blocks that a group moving the slots `moves` makes nonzero
 /// among the awake ones (a live group has a link to every slot it moves).
-#[inline]
+/// Out of line: inlined, it costs the assembly registers when the coupling
+/// is known.
+#[inline(never)]
 fn couple(coupled: &mut Coupling, moves: u16, awake: u16) {
     let mask = moves & awake;
     let mut bits = mask;
