@@ -377,8 +377,8 @@ fn spread<const N: usize>(
 
 /// Marks the blocks that a group moving the slots `moves` makes nonzero
 /// among the awake ones (a live group has a link to every slot it moves).
-/// Out of line: inlined, it costs the assembly registers when the coupling
-/// is known.
+/// Out of line: inlined into the assembly, it made the live loop's frames
+/// (where the coupling is mostly known) take more instructions.
 #[inline(never)]
 fn couple(coupled: &mut Coupling, moves: u16, awake: u16) {
     let mask = moves & awake;
@@ -594,6 +594,72 @@ fn substitute(l: &[Mat3], coupled: &Coupling, n: usize, y: &mut Rhs) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::body::{Angles, cmu};
+    use crate::goal::Goal;
+    use crate::pose::Pose;
+    use crate::solve::slots::Slots;
+    use crate::solve::{Solver, Work};
+
+    /// The coupling [`System::assemble`] finds from each live group's goal
+    /// mask is the one its links give: for every awake pair of slots `s ≤
+    /// t`, marked exactly when one live group has links to both (before
+    /// fill-in), checked pair by pair on the CMU skeleton with a point goal
+    /// in a segment's frame, some goals met and some asleep.
+    #[test]
+    fn coupling_from_goal_masks_is_that_of_the_links() {
+        let body = cmu::BODY;
+        let mut angles = Angles::<32>::rest(&body).unwrap();
+        let mut pose = Pose::<32>::default();
+        let goals = [
+            Goal::reach(cmu::index::LEFT_HAND, Vec3::new(0.3, 1.0, 0.2), 1.0),
+            Goal::reach(cmu::index::RIGHT_HAND, Vec3::new(-0.3, 1.0, 0.2), 2.0).in_frame(1),
+            Goal::reach(cmu::index::LEFT_FOOT, Vec3::new(0.1, 0.0, 0.1), 4.0),
+            Goal::reach(cmu::index::RIGHT_FOOT, Vec3::new(-0.1, 0.0, 0.1), 1.0),
+        ];
+        let mut work = Work::new(&body, &goals, &mut angles, &mut pose);
+        work.check().unwrap();
+        let mut slots = Slots::EMPTY;
+        slots.init(&goals, 4.0).unwrap();
+        let mut joints = Joints::<32>::EMPTY;
+        joints.init(&Solver::DEFAULT, &work, &slots);
+        joints.forward(&mut work);
+        slots.evaluate(&work).unwrap();
+        let mut checked = 0;
+        for (met, awake) in [(0u16, 0b1111u16), (0b0100, 0b1011), (0b1001, 0b0110)] {
+            for (j, slot) in slots.s.iter_mut().enumerate().take(4) {
+                // A met goal: its residual within the tolerance.
+                if met >> j & 1 != 0 {
+                    slot.r = Vec3::ZERO;
+                }
+            }
+            joints.settle(&slots, 1e-8);
+            joints.linearise(&work, &slots).unwrap();
+            let mut system = System::EMPTY;
+            system.awake = awake;
+            system.assemble(&mut joints, 4, 0.01);
+            let links = &joints.links;
+            for t in 0..4 {
+                for s in 0..=t {
+                    let both = awake >> s & 1 != 0 && awake >> t & 1 != 0;
+                    let shared = joints.groups().iter().filter(|g| g.live).any(|g| {
+                        let of = links_of(links, g);
+                        of.iter().any(|l| usize::from(l.slot) == s)
+                            && of.iter().any(|l| usize::from(l.slot) == t)
+                    });
+                    let mut direct = [0u16; MAX_GOALS];
+                    for g in joints.groups().iter().filter(|g| g.live) {
+                        couple(&mut direct, g.dep_a | g.dep_b, awake);
+                    }
+                    assert_eq!(direct[t] >> s & 1 != 0, both && shared, "({t}, {s})");
+                    if both && shared {
+                        assert!(system.coupled[t] >> s & 1 != 0, "({t}, {s})");
+                    }
+                    checked += 1;
+                }
+            }
+        }
+        assert_eq!(checked, 30);
+    }
 
     #[test]
     fn block_cholesky_matches_a_hand_solved_system() {
