@@ -85,7 +85,7 @@ pub const RESERVE_PER_SEGMENT: u32 = 1_660;
 /// More instructions of the synthesis per segment when it had to clamp or
 /// project the parameters into the table (the same rule for the worst rest
 /// of such a frame).
-pub const ADJUSTED_PER_SEGMENT: u32 = 1_150;
+pub const ADJUSTED_PER_SEGMENT: u32 = 580;
 
 /// The least budget the solver gets, whatever the rest of the frame takes:
 /// the fixed part and one iteration of the whole-tree solver on
@@ -180,7 +180,7 @@ mod tests {
         assert_eq!(frame_instructions(2000, 100_000_000), 119_047);
         assert_eq!(frame_instructions(u32::MAX, u32::MAX), u32::MAX);
         assert_eq!(reserve(13, false), 11_000 + 13 * 1_660);
-        assert_eq!(reserve(13, true), 11_000 + 13 * 2_810);
+        assert_eq!(reserve(13, true), 11_000 + 13 * 2_240);
         // humanoid16 at 1 kHz: 59,523 − 32,580 = 26,943, under the floor.
         let b = Budget::for_rig(1000, CLOCK_HZ, 13);
         assert_eq!(b.get(false), MIN_SOLVE_BUDGET);
@@ -190,7 +190,7 @@ mod tests {
         // At 500 Hz: the period less the reserve.
         let b = Budget::for_rig(2000, CLOCK_HZ, 13);
         assert_eq!(b.get(false), 119_047 - 32_580);
-        assert_eq!(b.get(true), 119_047 - 47_530);
+        assert_eq!(b.get(true), 119_047 - 40_120);
         assert_eq!(Budget::uniform(7).get(true), 7);
     }
 }

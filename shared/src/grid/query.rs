@@ -14,6 +14,10 @@ use super::{Adjust, Axis, Grid, GridError, MAX_AXES, MAX_WINDOW, Samples};
 use crate::math::SlerpWeight;
 use crate::pose::Pose;
 
+/// Cells per axis whose distances [`Grid::project`] works out once per
+/// projection.
+const PROJECT_CACHE: usize = 16;
+
 /// How one axis of a located query interpolates.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Shape {
@@ -249,30 +253,90 @@ impl<'a> Grid<'a> {
             })
     }
 
-    /// Nearest point of the nearest valid cell to `u` (cell units).
+    /// Nearest point of the nearest valid cell to `u` (cell units): the
+    /// first valid cell, in index order, at the least squared distance.
+    ///
+    /// The distance to a cell is a sum over the axes, so each axis's
+    /// squared distance to each of its cells is worked out once (for its
+    /// first [`PROJECT_CACHE`] cells; beyond, when needed), and the cells
+    /// are visited in index order as rows along axis 0 under an odometer of
+    /// the other axes: a cell costs its mask bit and a sum, not a division
+    /// and a distance per axis, and a row whose other axes alone are as far
+    /// as the best cell so far is skipped. A projection runs on every frame
+    /// whose parameters leave the table's data.
     fn project(&self, u: &[f32; MAX_AXES]) -> Result<([Located; MAX_AXES], f32), GridError> {
+        let axes = self.axes();
+        let along = |a: usize, k: u32| match (axes.get(a), u.get(a)) {
+            (Some(axis), Some(&ui)) => {
+                let (d, _) = nearest_in_cell(axis, ui, k);
+                d * d
+            }
+            _ => 0.0,
+        };
+        let mut cache = [[0.0f32; PROJECT_CACHE]; MAX_AXES];
+        for ((a, row), axis) in cache.iter_mut().enumerate().zip(axes) {
+            for (k, d) in row.iter_mut().enumerate().take(axis.cells() as usize) {
+                *d = along(a, k as u32);
+            }
+        }
+        let at = |a: usize, k: u32| match cache.get(a).and_then(|row| row.get(k as usize)) {
+            Some(&d) => d,
+            None => along(a, k),
+        };
+        let row_len = axes.first().map_or(1, Axis::cells).max(1);
+        let used = self.axis_count.min(MAX_AXES);
+        // The odometer of axes 1.. and their squared distances.
+        let mut digit = [0u32; MAX_AXES];
+        let mut sq = [0.0f32; MAX_AXES];
+        for (a, s) in sq.iter_mut().enumerate().take(used).skip(1) {
+            *s = at(a, 0);
+        }
+        let row0 = cache.first().map_or(&[][..], |r| &r[..]);
+        let mask = self.valid;
+        let valid = |c: u32| match mask {
+            Some(m) => m
+                .get((c >> 3) as usize)
+                .is_some_and(|b| b >> (c & 7) & 1 == 1),
+            None => true,
+        };
         let mut best: Option<(f32, u32)> = None;
-        for c in 0..self.cells {
-            if !self.cell_valid(c as usize) {
+        let mut row = 0u32;
+        while row < self.cells {
+            let outer = sq.get(1..used).unwrap_or(&[]);
+            // No cell of the row is nearer than the row's other axes (a
+            // sum of non-negative terms rounds no lower for one more), so
+            // a row at least as far as the best cell so far is skipped.
+            let floor = outer.iter().fold(0.0f32, |acc, s| acc + s);
+            if best.is_some_and(|(bd, _)| floor >= bd) {
+                row = row.saturating_add(row_len);
+                self.next_row(&mut digit, &mut sq, &at);
                 continue;
             }
-            let mut d2 = 0.0f32;
-            let mut rest = c;
-            for (axis, &ui) in self.axes().iter().zip(u) {
-                let n = axis.cells();
-                let k = rest.checked_rem(n).unwrap_or(0);
-                rest = rest.checked_div(n).unwrap_or(0);
-                let (d, _) = nearest_in_cell(axis, ui, k);
-                d2 += d * d;
+            // Every cell of the row is below `cells`, a multiple of its
+            // length.
+            for k in 0..row_len {
+                let c = row.wrapping_add(k);
+                if !valid(c) {
+                    continue;
+                }
+                let d0 = match row0.get(k as usize) {
+                    Some(&d) => d,
+                    None => along(0, k),
+                };
+                // The same sum, in the same order, as the distance's
+                // definition: 0 + d₀² + d₁² + …
+                let d2 = outer.iter().fold(0.0f32 + d0, |acc, s| acc + s);
+                if best.is_none_or(|(bd, _)| d2 < bd) {
+                    best = Some((d2, c));
+                }
             }
-            if best.is_none_or(|(bd, _)| d2 < bd) {
-                best = Some((d2, c));
-            }
+            row = row.saturating_add(row_len);
+            self.next_row(&mut digit, &mut sq, &at);
         }
         let (d2, c) = best.ok_or(GridError::NoValidCell)?;
         let mut loc = [Located { cell: 0, t: 0.0 }; MAX_AXES];
         let mut rest = c;
-        for ((l, axis), &ui) in loc.iter_mut().zip(self.axes()).zip(u) {
+        for ((l, axis), &ui) in loc.iter_mut().zip(axes).zip(u) {
             let n = axis.cells();
             let k = rest.checked_rem(n).unwrap_or(0);
             rest = rest.checked_div(n).unwrap_or(0);
@@ -280,6 +344,28 @@ impl<'a> Grid<'a> {
             *l = Located { cell: k, t };
         }
         Ok((loc, d2))
+    }
+
+    /// Turns the odometer of [`Grid::project`] to the next row: the first
+    /// axis after axis 0 whose digit does not wrap takes its next cell's
+    /// squared distance `at(a, k)`; the axes below it go back to cell 0.
+    #[inline(always)]
+    fn next_row(
+        &self,
+        digit: &mut [u32; MAX_AXES],
+        sq: &mut [f32; MAX_AXES],
+        at: &impl Fn(usize, u32) -> f32,
+    ) {
+        let turning = digit.iter_mut().zip(sq.iter_mut()).zip(self.axes());
+        for (a, ((k, s), axis)) in turning.enumerate().skip(1) {
+            *k += 1;
+            if *k < axis.cells() {
+                *s = at(a, *k);
+                return;
+            }
+            *k = 0;
+            *s = at(a, 0);
+        }
     }
 
     fn build_query(&self, loc: &[Located; MAX_AXES], adjust: Adjust, q: &mut Query) {
@@ -524,5 +610,86 @@ impl Query {
             axes,
             axis_count: self.axis_count,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The projection as first written, a division per axis per cell: the
+    /// slow obvious reference of [`Grid::project`]'s odometer.
+    fn project_slow(g: &Grid<'_>, u: &[f32; MAX_AXES]) -> Option<(u32, [u32; MAX_AXES], f32)> {
+        let mut best: Option<(f32, u32)> = None;
+        for c in 0..g.cells {
+            if !g.cell_valid(c as usize) {
+                continue;
+            }
+            let mut d2 = 0.0f32;
+            let mut rest = c;
+            for (axis, &ui) in g.axes().iter().zip(u) {
+                let n = axis.cells();
+                let (d, _) = nearest_in_cell(axis, ui, rest % n);
+                rest /= n;
+                d2 += d * d;
+            }
+            if best.is_none_or(|(bd, _)| d2 < bd) {
+                best = Some((d2, c));
+            }
+        }
+        let (d2, c) = best?;
+        let mut cells = [0u32; MAX_AXES];
+        let mut rest = c;
+        for (k, axis) in cells.iter_mut().zip(g.axes()) {
+            *k = rest % axis.cells();
+            rest /= axis.cells();
+        }
+        Some((c, cells, d2))
+    }
+
+    #[test]
+    fn the_odometer_projects_as_the_division_per_cell_did() {
+        let mut h = 0x1234_5678u32;
+        let mut next = move || {
+            h = h.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            h >> 8
+        };
+        let mut projected = 0;
+        for case in 0..400 {
+            let axis_count = 1 + (next() % 4) as usize;
+            let mut axes = [Axis::linear(0.0, 1.0, 2); 4];
+            for a in axes.iter_mut().take(axis_count) {
+                a.count = 2 + next() % 5;
+                if next() % 4 == 0 {
+                    a.wrap = Wrap::Cyclic {
+                        period: a.count as f32,
+                    };
+                }
+            }
+            // Sparse masks (about one cell in five valid), some empty.
+            let mask: [u8; 160] = core::array::from_fn(|_| {
+                (0..8).fold(0u8, |m, b| m | (u8::from(next() % 5 == 0) << b))
+            });
+            let g = Grid::new(&axes[..axis_count], Some(&mask)).unwrap();
+            let mut u = [0.0f32; MAX_AXES];
+            for (ui, axis) in u.iter_mut().zip(g.axes()) {
+                // Anywhere from a cell before the axis to one after it.
+                *ui = (next() % 10_000) as f32 / 10_000.0 * (axis.count as f32 + 2.0) - 1.0;
+            }
+            let fast = g.project(&u).ok();
+            let slow = project_slow(&g, &u);
+            match (fast, slow) {
+                (None, None) => {}
+                (Some((loc, d2)), Some((c, cells, slow_d2))) => {
+                    projected += 1;
+                    assert_eq!(d2.to_bits(), slow_d2.to_bits(), "case {case}: cell {c}");
+                    for (l, k) in loc.iter().zip(cells).take(axis_count) {
+                        assert_eq!(l.cell, k, "case {case}");
+                    }
+                }
+                (f, s) => panic!("case {case}: {f:?} against {s:?}"),
+            }
+        }
+        assert!(projected > 300, "{projected}");
     }
 }
