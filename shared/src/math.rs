@@ -656,6 +656,12 @@ pub trait Lane:
     /// Lane-wise [`copysign`]`(self, s)`.
     #[must_use]
     fn copysign(self, s: Self) -> Self;
+    /// The twelve coefficients of `w` for a dot product `d`, lane by lane:
+    /// [`TreeWeight`]'s row for a clear sign bit of `d`, or its row for a set
+    /// one (the same row with the odd part of `w0` and the even part of
+    /// `w1` negated).
+    #[must_use]
+    fn tree_coefficients(w: &TreeWeight, d: Self) -> [Self; 12];
 }
 
 impl Lane for f32 {
@@ -670,6 +676,15 @@ impl Lane for f32 {
     #[inline]
     fn copysign(self, s: Self) -> Self {
         copysign(self, s)
+    }
+    /// Picks the row by the sign bit as an offset (no branch or select).
+    #[inline(always)]
+    fn tree_coefficients(w: &TreeWeight, d: Self) -> [Self; 12] {
+        let at = (d.to_bits() >> 31) as usize * 12;
+        match w.rows.get(at..).and_then(<[f32]>::first_chunk::<12>) {
+            Some(row) => *row,
+            None => [0.0; 12],
+        }
     }
 }
 
@@ -716,6 +731,21 @@ impl Lane for F4 {
             copysign(a3, s3),
         ])
     }
+    /// Row 0 broadcast, with the sign bits of `d` flipped into the
+    /// coefficients that row 1 negates (negation is exact, so each lane
+    /// gets row 1's bits where its sign bit is set).
+    #[inline(always)]
+    fn tree_coefficients(w: &TreeWeight, d: Self) -> [Self; 12] {
+        let plus = w.rows.first_chunk::<12>().unwrap_or(&[0.0; 12]);
+        let sign = d.0.map(|v| v.to_bits() & 0x8000_0000);
+        let mut out = [F4::splat(0.0); 12];
+        for (k, (o, &c)) in out.iter_mut().zip(plus).enumerate() {
+            let flip = TREE_NEGATED.get(k).copied().unwrap_or(false);
+            let m = if flip { sign } else { [0; 4] };
+            *o = F4(m.map(|m| f32::from_bits(c.to_bits() ^ m)));
+        }
+        out
+    }
 }
 
 /// Where a [`SlerpWeight`] sits: the endpoints return an input unchanged.
@@ -724,6 +754,19 @@ enum SlerpMode {
     Start,
     Mid,
     End,
+}
+
+impl SlerpMode {
+    /// The mode of parameter `t`: `Start` at `t ≤ 0`, `End` at `t ≥ 1`.
+    fn of(t: f32) -> Self {
+        if t <= 0.0 {
+            SlerpMode::Start
+        } else if t >= 1.0 {
+            SlerpMode::End
+        } else {
+            SlerpMode::Mid
+        }
+    }
 }
 
 /// A slerp parameter `t` with its weight polynomials precomputed, for
@@ -751,13 +794,7 @@ impl SlerpWeight {
     /// Precomputes the weight for `t` (clamped to `[0, 1]`).
     #[must_use]
     pub fn new(t: f32) -> Self {
-        let mode = if t <= 0.0 {
-            SlerpMode::Start
-        } else if t >= 1.0 {
-            SlerpMode::End
-        } else {
-            SlerpMode::Mid
-        };
+        let mode = SlerpMode::of(t);
         let t = t.clamp(0.0, 1.0);
         if mode != SlerpMode::Mid {
             // The endpoints return an input; no polynomial needed.
@@ -843,19 +880,6 @@ impl SlerpWeight {
         renormalize_lanes(self.blend(a, b))
     }
 
-    /// The weight with its polynomial coefficients as lane values (for
-    /// [`F4`], each broadcast to four lanes once rather than in every
-    /// blend).
-    #[inline]
-    #[must_use]
-    pub fn lanes<T: Lane>(&self) -> LaneWeight<T> {
-        LaneWeight {
-            w0: self.w0.map(T::splat),
-            w1: self.w1.map(T::splat),
-            mode: self.mode,
-        }
-    }
-
     /// [`SlerpWeight::blend_lanes`] for a weight known to blend
     /// ([`SlerpWeight::is_blend`]); an endpoint weight gives zeros.
     #[inline(always)]
@@ -865,25 +889,100 @@ impl SlerpWeight {
     }
 }
 
-/// A [`SlerpWeight`] whose polynomial coefficients are lane values
-/// ([`SlerpWeight::lanes`]): the same operations, so the same bits.
+/// Which of a [`TreeWeight`] row's twelve coefficients the row for a
+/// negative dot negates: the odd part of `w0` and the even part of `w1`.
+const TREE_NEGATED: [bool; 12] = [
+    false, false, false, true, true, true, true, true, true, false, false, false,
+];
+
+/// A [`SlerpWeight`] for interpolation trees normalized once at the root
+/// (the grid's trilinear tree): the same fitted polynomials and
+/// unnormalized blend as [`SlerpWeight::blend_lanes`], evaluated without
+/// `|d|` or a sign copy.
+///
+/// With `y = d²` the weights split into even and odd parts,
+/// `W(x) = E(y) + x·O(y)` with `x = |d|`, so the shortest-arc weights are
+/// `w0 = E0(y) + d·(s·O0(y))` and `w1 = s·W1(x) = s·E1(y) + d·O1(y)`, `s`
+/// the sign of `d`. The sign goes into the coefficients: row 0 is for a
+/// clear sign bit, row 1 the same with `O0` and `E1` negated, and each
+/// blend reads the row its dot's sign bit picks
+/// ([`Lane::tree_coefficients`]). The parts are evaluated as
+/// `(c0 + c1·y) + c2·y²`, the dot in sequence: other roundings than
+/// [`SlerpWeight::blend_lanes`] (a few ulp in the weights, against the
+/// fit's 7e-6), the same on every [`Lane`] type.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LaneWeight<T> {
-    w0: [T; 6],
-    w1: [T; 6],
+pub struct TreeWeight {
+    /// `[e0₀, e0₁, e0₂, o0₀, o0₁, o0₂, e1₀, e1₁, e1₂, o1₀, o1₁, o1₂]`
+    /// for a clear sign bit of the dot, then the twelve for a set one.
+    rows: [f32; 24],
     mode: SlerpMode,
 }
 
-impl<T: Lane> LaneWeight<T> {
-    /// [`SlerpWeight::blend_lanes`] with this weight.
+impl TreeWeight {
+    /// The weight for `t` (clamped to `[0, 1]`): [`SlerpWeight::new`]'s
+    /// polynomials.
+    #[must_use]
+    pub fn new(t: f32) -> Self {
+        let mode = SlerpMode::of(t);
+        if mode != SlerpMode::Mid {
+            // The endpoints return an input; no polynomial needed.
+            return Self {
+                rows: [0.0; 24],
+                mode,
+            };
+        }
+        let [a0, a1, a2, a3, a4, a5] = weight_poly(1.0 - t);
+        let [b0, b1, b2, b3, b4, b5] = weight_poly(t);
+        Self {
+            rows: [
+                a0, a2, a4, a1, a3, a5, b0, b2, b4, b1, b3, b5, //
+                a0, a2, a4, -a1, -a3, -a5, -b0, -b2, -b4, b1, b3, b5,
+            ],
+            mode,
+        }
+    }
+
+    /// Whether this weight blends (`0 < t < 1`) rather than returning an input.
+    #[inline]
+    #[must_use]
+    pub fn is_blend(&self) -> bool {
+        self.mode == SlerpMode::Mid
+    }
+
+    /// `w0·a + w1·b`, the unnormalized shortest-arc slerp of unit `a`, `b`
+    /// (length within 4e-6 of 1, see [`SlerpWeight::blend_lanes`]); the
+    /// endpoints return an input unchanged.
     #[inline(always)]
     #[must_use]
-    pub fn blend_lanes(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
+    pub fn blend_lanes<T: Lane>(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
         match self.mode {
             SlerpMode::Start => a,
             SlerpMode::End => b,
-            SlerpMode::Mid => blend(&self.w0, &self.w1, a, b),
+            SlerpMode::Mid => self.blend(a, b),
         }
+    }
+
+    /// [`TreeWeight::blend_lanes`] for a weight known to blend
+    /// ([`TreeWeight::is_blend`]); an endpoint weight gives zeros.
+    #[inline(always)]
+    #[must_use]
+    pub fn blend<T: Lane>(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
+        let [ax, ay, az, aw] = a;
+        let [bx, by, bz, bw] = b;
+        let d = ((ax * bx + ay * by) + az * bz) + aw * bw;
+        let [e00, e01, e02, o00, o01, o02, e10, e11, e12, o10, o11, o12] =
+            T::tree_coefficients(self, d);
+        let y = d * d;
+        let y2 = y * y;
+        let part = |c0: T, c1: T, c2: T| (c0 + c1 * y) + c2 * y2;
+        let w0 = part(e00, e01, e02) + d * part(o00, o01, o02);
+        let w1 = part(e10, e11, e12) + d * part(o10, o11, o12);
+        [
+            ax * w0 + bx * w1,
+            ay * w0 + by * w1,
+            az * w0 + bz * w1,
+            aw * w0 + bw * w1,
+        ]
     }
 }
 

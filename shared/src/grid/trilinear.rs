@@ -21,7 +21,7 @@ use glam::{Quat, Vec3};
 use super::lanes::{Soa, blend_pairs, fetch_block};
 use super::query::AxisQuery;
 use super::{GridError, MAX_WINDOW, Samples};
-use crate::math::{self, F4, Lane, LaneWeight, SlerpWeight};
+use crate::math::{self, Lane, TreeWeight};
 
 /// The W&H hand grid, three linear axes: a 2×2×2 window and the tree
 /// `z(y(x(q0, q1), x(q2, q3)), y(x(q4, q5), x(q6, q7)))` of unnormalized
@@ -29,7 +29,7 @@ use crate::math::{self, F4, Lane, LaneWeight, SlerpWeight};
 pub(super) struct Trilinear {
     index: [u32; 8],
     weight: [f32; 8],
-    slerp: [SlerpWeight; 3],
+    slerp: [TreeWeight; 3],
     blends: bool,
 }
 
@@ -41,9 +41,9 @@ impl Trilinear {
         let at = |a: u32, b: u32, c: u32| a.wrapping_add(b).wrapping_add(c);
         // Written out, not `[..].map(..)` (an out-of-line loop at opt-level "s").
         let slerp = [
-            SlerpWeight::new(x.t),
-            SlerpWeight::new(y.t),
-            SlerpWeight::new(z.t),
+            TreeWeight::new(x.t),
+            TreeWeight::new(y.t),
+            TreeWeight::new(z.t),
         ];
         Self {
             index: [
@@ -66,7 +66,7 @@ impl Trilinear {
                 u0 * v1 * w1,
                 u1 * v1 * w1,
             ],
-            blends: slerp.iter().any(SlerpWeight::is_blend),
+            blends: slerp.iter().any(TreeWeight::is_blend),
             slerp,
         }
     }
@@ -97,7 +97,7 @@ impl Trilinear {
         rotations: &mut [Quat],
     ) -> Result<(), GridError> {
         let all = positions.iter_mut().zip(rotations.iter_mut());
-        let blends = self.slerp.iter().all(SlerpWeight::is_blend);
+        let blends = self.slerp.iter().all(TreeWeight::is_blend);
         if S::DECODES {
             // The whole window first (one copy of the decoder), then the tree.
             for (seg, (p, r)) in all.enumerate() {
@@ -190,7 +190,6 @@ impl Trilinear {
     ) -> Result<(), GridError> {
         const BLOCK: usize = MAX_WINDOW / 8;
         let mut buf = Soa::new();
-        let weights = self.slerp.each_ref().map(SlerpWeight::lanes::<F4>);
         let blocks = positions.chunks_mut(BLOCK).zip(rotations.chunks_mut(BLOCK));
         for (k, (p, r)) in blocks.enumerate() {
             let count = p.len();
@@ -198,7 +197,7 @@ impl Trilinear {
             fetch_block(samples, window, (k * BLOCK, BLOCK), p, &mut buf)?;
             for lane in [0, 4] {
                 if lane < count {
-                    self.tree_lanes::<BLOCK>(&weights, &mut buf, lane);
+                    self.tree_lanes::<BLOCK>(&mut buf, lane);
                 }
             }
             buf.store(r);
@@ -210,13 +209,8 @@ impl Trilinear {
     /// `[window][B]`, level by level in place; the results end up in slots
     /// `lane..lane + 4`.
     #[inline(always)]
-    fn tree_lanes<const B: usize>(
-        &self,
-        weights: &[LaneWeight<F4>; 3],
-        buf: &mut Soa,
-        lane: usize,
-    ) {
-        let [x, y, z] = weights;
+    fn tree_lanes<const B: usize>(&self, buf: &mut Soa, lane: usize) {
+        let [x, y, z] = &self.slerp;
         blend_pairs::<B>(buf, x, 4, lane);
         blend_pairs::<B>(buf, y, 2, lane);
         blend_pairs::<B>(buf, z, 1, lane);
