@@ -1425,3 +1425,47 @@ fn hdm05_reach_clips() {
         .unwrap();
     assert!(out.positions().iter().all(|p| p.is_finite()));
 }
+
+#[test]
+fn tree_weight_blend_is_the_fast_slerp_blend_on_every_lane_type() {
+    // `TreeWeight` evaluates `SlerpWeight`'s polynomials in another order
+    // with the dot's sign in the coefficients: the same blend to rounding
+    // (checked against the old formula, `SlerpWeight::blend_lanes`), both
+    // dot signs, and the same bits on `f32` and on `F4` lanes.
+    let mut rng = Rng::new(77);
+    let mut worst = 0.0f32;
+    for i in 0..20_000 {
+        let t = rng.range(0.0, 1.0) as f32;
+        let (old, new) = (math::SlerpWeight::new(t), math::TreeWeight::new(t));
+        let quats: Vec<[f32; 4]> = (0..8)
+            .map(|k| {
+                let q = q32(rng.quat());
+                let s = if (i + k) % 3 == 0 { -1.0 } else { 1.0 };
+                [q.x * s, q.y * s, q.z * s, q.w * s]
+            })
+            .collect();
+        let mut lanes = [[[0.0f32; 4]; 4]; 2];
+        for k in 0..4 {
+            let (a, b) = (quats[2 * k], quats[2 * k + 1]);
+            let want = old.blend_lanes(a, b);
+            let got = new.blend_lanes(a, b);
+            for (w, g) in want.iter().zip(got) {
+                worst = worst.max((w - g).abs());
+            }
+            for c in 0..4 {
+                lanes[0][c][k] = a[c];
+                lanes[1][c][k] = b[c];
+            }
+        }
+        let [a, b] = lanes.map(|q| q.map(math::F4));
+        let wide = new.blend_lanes(a, b);
+        for k in 0..4 {
+            let one = new.blend_lanes(quats[2 * k], quats[2 * k + 1]);
+            for c in 0..4 {
+                assert_eq!(wide[c].0[k].to_bits(), one[c].to_bits(), "t {t}");
+            }
+        }
+    }
+    println!("tree blend against the old formula: max component difference {worst:e}");
+    assert!(worst < 2e-6, "{worst:e}");
+}

@@ -756,19 +756,6 @@ enum SlerpMode {
     End,
 }
 
-impl SlerpMode {
-    /// The mode of parameter `t`: `Start` at `t ≤ 0`, `End` at `t ≥ 1`.
-    fn of(t: f32) -> Self {
-        if t <= 0.0 {
-            SlerpMode::Start
-        } else if t >= 1.0 {
-            SlerpMode::End
-        } else {
-            SlerpMode::Mid
-        }
-    }
-}
-
 /// A slerp parameter `t` with its weight polynomials precomputed, for
 /// applying the same `t` to many quaternion pairs (one grid query applies
 /// the same coefficients to every segment). See the module doc.
@@ -794,7 +781,13 @@ impl SlerpWeight {
     /// Precomputes the weight for `t` (clamped to `[0, 1]`).
     #[must_use]
     pub fn new(t: f32) -> Self {
-        let mode = SlerpMode::of(t);
+        let mode = if t <= 0.0 {
+            SlerpMode::Start
+        } else if t >= 1.0 {
+            SlerpMode::End
+        } else {
+            SlerpMode::Mid
+        };
         let t = t.clamp(0.0, 1.0);
         if mode != SlerpMode::Mid {
             // The endpoints return an input; no polynomial needed.
@@ -920,25 +913,18 @@ pub struct TreeWeight {
 
 impl TreeWeight {
     /// The weight for `t` (clamped to `[0, 1]`): [`SlerpWeight::new`]'s
-    /// polynomials.
+    /// polynomials, rearranged and negated (no other evaluation).
     #[must_use]
     pub fn new(t: f32) -> Self {
-        let mode = SlerpMode::of(t);
-        if mode != SlerpMode::Mid {
-            // The endpoints return an input; no polynomial needed.
-            return Self {
-                rows: [0.0; 24],
-                mode,
-            };
-        }
-        let [a0, a1, a2, a3, a4, a5] = weight_poly(1.0 - t);
-        let [b0, b1, b2, b3, b4, b5] = weight_poly(t);
+        let w = SlerpWeight::new(t);
+        let [a0, a1, a2, a3, a4, a5] = w.w0;
+        let [b0, b1, b2, b3, b4, b5] = w.w1;
         Self {
             rows: [
                 a0, a2, a4, a1, a3, a5, b0, b2, b4, b1, b3, b5, //
                 a0, a2, a4, -a1, -a3, -a5, -b0, -b2, -b4, b1, b3, b5,
             ],
-            mode,
+            mode: w.mode,
         }
     }
 

@@ -2,9 +2,10 @@
 //!
 //! The window is 2×2×2 and the rotation tree
 //! `z(y(x(q0, q1), x(q2, q3)), y(x(q4, q5), x(q6, q7)))`. Its slerps skip
-//! the normalization step of the fast slerp
-//! ([`crate::math::SlerpWeight::blend_lanes`]: a blend of unit inputs is
-//! already unit to within 4e-6) and only the root is normalized, by the same
+//! the normalization step of the fast slerp (a blend of unit inputs is
+//! already unit to within 4e-6) and take the shortest arc through their
+//! coefficients ([`crate::math::TreeWeight`]: the fast slerp's polynomials,
+//! no `|d|` or sign copy per blend); only the root is normalized, by the same
 //! Newton step ([`crate::math::renormalize_lanes`]); the result stays within
 //! the grid's stated bound (see [`crate::grid`]) and unit to within 1e-6
 //! (`tests/synth.rs`). When a level's coefficient is exactly 0 or 1 that
