@@ -656,12 +656,6 @@ pub trait Lane:
     /// Lane-wise [`copysign`]`(self, s)`.
     #[must_use]
     fn copysign(self, s: Self) -> Self;
-    /// The twelve coefficients of `w` for a dot product `d`, lane by lane:
-    /// [`TreeWeight`]'s row for a clear sign bit of `d`, or its row for a set
-    /// one (the same row with the odd part of `w0` and the even part of
-    /// `w1` negated).
-    #[must_use]
-    fn tree_coefficients(w: &TreeWeight, d: Self) -> [Self; 12];
 }
 
 impl Lane for f32 {
@@ -676,15 +670,6 @@ impl Lane for f32 {
     #[inline]
     fn copysign(self, s: Self) -> Self {
         copysign(self, s)
-    }
-    /// Picks the row by the sign bit as an offset (no branch or select).
-    #[inline(always)]
-    fn tree_coefficients(w: &TreeWeight, d: Self) -> [Self; 12] {
-        let at = (d.to_bits() >> 31) as usize * 12;
-        match w.rows.get(at..).and_then(<[f32]>::first_chunk::<12>) {
-            Some(row) => *row,
-            None => [0.0; 12],
-        }
     }
 }
 
@@ -730,21 +715,6 @@ impl Lane for F4 {
             copysign(a2, s2),
             copysign(a3, s3),
         ])
-    }
-    /// Row 0 broadcast, with the sign bits of `d` flipped into the
-    /// coefficients that row 1 negates (negation is exact, so each lane
-    /// gets row 1's bits where its sign bit is set).
-    #[inline(always)]
-    fn tree_coefficients(w: &TreeWeight, d: Self) -> [Self; 12] {
-        let plus = w.rows.first_chunk::<12>().unwrap_or(&[0.0; 12]);
-        let sign = d.0.map(|v| v.to_bits() & 0x8000_0000);
-        let mut out = [F4::splat(0.0); 12];
-        for (k, (o, &c)) in out.iter_mut().zip(plus).enumerate() {
-            let flip = TREE_NEGATED.get(k).copied().unwrap_or(false);
-            let m = if flip { sign } else { [0; 4] };
-            *o = F4(m.map(|m| f32::from_bits(c.to_bits() ^ m)));
-        }
-        out
     }
 }
 
@@ -882,12 +852,6 @@ impl SlerpWeight {
     }
 }
 
-/// Which of a [`TreeWeight`] row's twelve coefficients the row for a
-/// negative dot negates: the odd part of `w0` and the even part of `w1`.
-const TREE_NEGATED: [bool; 12] = [
-    false, false, false, true, true, true, true, true, true, false, false, false,
-];
-
 /// A [`SlerpWeight`] for interpolation trees normalized once at the root
 /// (the grid's trilinear tree): the same fitted polynomials and
 /// unnormalized blend as [`SlerpWeight::blend_lanes`], evaluated without
@@ -898,8 +862,8 @@ const TREE_NEGATED: [bool; 12] = [
 /// `w0 = E0(y) + d·(s·O0(y))` and `w1 = s·W1(x) = s·E1(y) + d·O1(y)`, `s`
 /// the sign of `d`. The sign goes into the coefficients: row 0 is for a
 /// clear sign bit, row 1 the same with `O0` and `E1` negated, and each
-/// blend reads the row its dot's sign bit picks
-/// ([`Lane::tree_coefficients`]). The parts are evaluated as
+/// blend reads the row its dot's sign bit picks (on [`F4`] lanes,
+/// [`TreeLanes`]). The parts are evaluated as
 /// `(c0 + c1·y) + c2·y²`, the dot in sequence: other roundings than
 /// [`SlerpWeight::blend_lanes`] (a few ulp in the weights, against the
 /// fit's 7e-6), the same on every [`Lane`] type.
@@ -940,7 +904,7 @@ impl TreeWeight {
     /// endpoints return an input unchanged.
     #[inline(always)]
     #[must_use]
-    pub fn blend_lanes<T: Lane>(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
+    pub fn blend_lanes(&self, a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
         match self.mode {
             SlerpMode::Start => a,
             SlerpMode::End => b,
@@ -949,27 +913,103 @@ impl TreeWeight {
     }
 
     /// [`TreeWeight::blend_lanes`] for a weight known to blend
-    /// ([`TreeWeight::is_blend`]); an endpoint weight gives zeros.
+    /// ([`TreeWeight::is_blend`]); an endpoint weight gives zeros. The row
+    /// is picked by the dot's sign bit as an offset (no branch or select).
     #[inline(always)]
     #[must_use]
-    pub fn blend<T: Lane>(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
-        let [ax, ay, az, aw] = a;
-        let [bx, by, bz, bw] = b;
-        let d = ((ax * bx + ay * by) + az * bz) + aw * bw;
-        let [e00, e01, e02, o00, o01, o02, e10, e11, e12, o10, o11, o12] =
-            T::tree_coefficients(self, d);
-        let y = d * d;
-        let y2 = y * y;
-        let part = |c0: T, c1: T, c2: T| (c0 + c1 * y) + c2 * y2;
-        let w0 = part(e00, e01, e02) + d * part(o00, o01, o02);
-        let w1 = part(e10, e11, e12) + d * part(o10, o11, o12);
-        [
-            ax * w0 + bx * w1,
-            ay * w0 + by * w1,
-            az * w0 + bz * w1,
-            aw * w0 + bw * w1,
-        ]
+    pub fn blend(&self, a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+        let d = tree_dot(a, b);
+        let at = (d.to_bits() >> 31) as usize * 12;
+        let c = match self.rows.get(at..).and_then(<[f32]>::first_chunk::<12>) {
+            Some(row) => *row,
+            None => [0.0; 12],
+        };
+        tree_blend(c, d, a, b)
     }
+
+    /// The weight for four lanes at a time, row 0 broadcast once.
+    #[inline]
+    #[must_use]
+    pub fn lanes(&self) -> TreeLanes {
+        let plus = self.rows.first_chunk::<12>().unwrap_or(&[0.0; 12]);
+        TreeLanes {
+            plus: plus.map(F4::splat),
+            mode: self.mode,
+        }
+    }
+}
+
+/// A [`TreeWeight`] on [`F4`] lanes ([`TreeWeight::lanes`]): each lane
+/// gets the row its dot's sign bit picks, by flipping that sign bit into
+/// the coefficients row 1 negates (negation is exact), so the same bits as
+/// [`TreeWeight::blend_lanes`] lane by lane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TreeLanes {
+    plus: [F4; 12],
+    mode: SlerpMode,
+}
+
+impl TreeLanes {
+    /// [`TreeWeight::blend_lanes`] on four lanes.
+    #[inline(always)]
+    #[must_use]
+    pub fn blend_lanes(&self, a: [F4; 4], b: [F4; 4]) -> [F4; 4] {
+        match self.mode {
+            SlerpMode::Start => a,
+            SlerpMode::End => b,
+            SlerpMode::Mid => {
+                let d = tree_dot(a, b);
+                let [s0, s1, s2, s3] = d.0.map(|v| v.to_bits() & 0x8000_0000);
+                let flip = |c: F4| {
+                    let [c0, c1, c2, c3] = c.0.map(f32::to_bits);
+                    F4([c0 ^ s0, c1 ^ s1, c2 ^ s2, c3 ^ s3].map(f32::from_bits))
+                };
+                let [c0, c1, c2, c3, c4, c5, c6, c7, c8, c9, c10, c11] = self.plus;
+                let c = [
+                    c0,
+                    c1,
+                    c2,
+                    flip(c3),
+                    flip(c4),
+                    flip(c5),
+                    flip(c6),
+                    flip(c7),
+                    flip(c8),
+                    c9,
+                    c10,
+                    c11,
+                ];
+                tree_blend(c, d, a, b)
+            }
+        }
+    }
+}
+
+/// The dot product of a [`TreeWeight`] blend, summed in sequence.
+#[inline(always)]
+fn tree_dot<T: Lane>(a: [T; 4], b: [T; 4]) -> T {
+    let [ax, ay, az, aw] = a;
+    let [bx, by, bz, bw] = b;
+    ((ax * bx + ay * by) + az * bz) + aw * bw
+}
+
+/// A [`TreeWeight`] blend from its dot `d` and the row `c` for `d`'s sign.
+#[inline(always)]
+fn tree_blend<T: Lane>(c: [T; 12], d: T, a: [T; 4], b: [T; 4]) -> [T; 4] {
+    let [ax, ay, az, aw] = a;
+    let [bx, by, bz, bw] = b;
+    let [e00, e01, e02, o00, o01, o02, e10, e11, e12, o10, o11, o12] = c;
+    let y = d * d;
+    let y2 = y * y;
+    let part = |c0: T, c1: T, c2: T| (c0 + c1 * y) + c2 * y2;
+    let w0 = part(e00, e01, e02) + d * part(o00, o01, o02);
+    let w1 = part(e10, e11, e12) + d * part(o10, o11, o12);
+    [
+        ax * w0 + bx * w1,
+        ay * w0 + by * w1,
+        az * w0 + bz * w1,
+        aw * w0 + bw * w1,
+    ]
 }
 
 /// The fast slerp's unnormalized blend `w0·a + w1·b` (see the module doc).

@@ -22,7 +22,7 @@ use glam::{Quat, Vec3};
 use super::lanes::{Soa, blend_pairs, fetch_block};
 use super::query::AxisQuery;
 use super::{GridError, MAX_WINDOW, Samples};
-use crate::math::{self, Lane, TreeWeight};
+use crate::math::{self, TreeLanes, TreeWeight};
 
 /// The W&H hand grid, three linear axes: a 2×2×2 window and the tree
 /// `z(y(x(q0, q1), x(q2, q3)), y(x(q4, q5), x(q6, q7)))` of unnormalized
@@ -191,6 +191,8 @@ impl Trilinear {
     ) -> Result<(), GridError> {
         const BLOCK: usize = MAX_WINDOW / 8;
         let mut buf = Soa::new();
+        let [x, y, z] = &self.slerp;
+        let levels = [x.lanes(), y.lanes(), z.lanes()];
         let blocks = positions.chunks_mut(BLOCK).zip(rotations.chunks_mut(BLOCK));
         for (k, (p, r)) in blocks.enumerate() {
             let count = p.len();
@@ -198,7 +200,7 @@ impl Trilinear {
             fetch_block(samples, window, (k * BLOCK, BLOCK), p, &mut buf)?;
             for lane in [0, 4] {
                 if lane < count {
-                    self.tree_lanes::<BLOCK>(&mut buf, lane);
+                    self.tree_lanes::<BLOCK>(&levels, &mut buf, lane);
                 }
             }
             buf.store(r);
@@ -210,8 +212,8 @@ impl Trilinear {
     /// `[window][B]`, level by level in place; the results end up in slots
     /// `lane..lane + 4`.
     #[inline(always)]
-    fn tree_lanes<const B: usize>(&self, buf: &mut Soa, lane: usize) {
-        let [x, y, z] = &self.slerp;
+    fn tree_lanes<const B: usize>(&self, levels: &[TreeLanes; 3], buf: &mut Soa, lane: usize) {
+        let [x, y, z] = levels;
         blend_pairs::<B>(buf, x, 4, lane);
         blend_pairs::<B>(buf, y, 2, lane);
         blend_pairs::<B>(buf, z, 1, lane);
@@ -263,9 +265,9 @@ impl Trilinear {
         Ok((p, q))
     }
 
-    /// The rotation tree on any lane type.
+    /// The rotation tree (with the endpoint checks).
     #[inline(always)]
-    fn tree<T: Lane>(&self, q: [[T; 4]; 8]) -> [T; 4] {
+    fn tree(&self, q: [[f32; 4]; 8]) -> [f32; 4] {
         let [q0, q1, q2, q3, q4, q5, q6, q7] = q;
         let [x, y, z] = &self.slerp;
         let ab = y.blend_lanes(x.blend_lanes(q0, q1), x.blend_lanes(q2, q3));
