@@ -940,8 +940,8 @@ impl TreeWeight {
 }
 
 /// A [`TreeWeight`] on [`F4`] lanes ([`TreeWeight::lanes`]): each lane
-/// gets the row its dot's sign bit picks, by flipping that sign bit into
-/// the coefficients row 1 negates (negation is exact), so the same bits as
+/// gets the row its dot's sign bit picks, by multiplying the coefficients
+/// row 1 negates by ±1 (exact), so the same bits as
 /// [`TreeWeight::blend_lanes`] lane by lane.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TreeLanes {
@@ -959,11 +959,9 @@ impl TreeLanes {
             SlerpMode::End => b,
             SlerpMode::Mid => {
                 let d = tree_dot(a, b);
-                let [s0, s1, s2, s3] = d.0.map(|v| v.to_bits() & 0x8000_0000);
-                let flip = |c: F4| {
-                    let [c0, c1, c2, c3] = c.0.map(f32::to_bits);
-                    F4([c0 ^ s0, c1 ^ s1, c2 ^ s2, c3 ^ s3].map(f32::from_bits))
-                };
+                // ±1 by the sign bit: multiplying by it negates exactly.
+                let sign = F4::splat(1.0).copysign(d);
+                let flip = |c: F4| c * sign;
                 let [c0, c1, c2, c3, c4, c5, c6, c7, c8, c9, c10, c11] = self.plus;
                 let c = [
                     c0,
