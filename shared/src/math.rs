@@ -843,6 +843,19 @@ impl SlerpWeight {
         renormalize_lanes(self.blend(a, b))
     }
 
+    /// The weight with its polynomial coefficients as lane values (for
+    /// [`F4`], each broadcast to four lanes once rather than in every
+    /// blend).
+    #[inline]
+    #[must_use]
+    pub fn lanes<T: Lane>(&self) -> LaneWeight<T> {
+        LaneWeight {
+            w0: self.w0.map(T::splat),
+            w1: self.w1.map(T::splat),
+            mode: self.mode,
+        }
+    }
+
     /// [`SlerpWeight::blend_lanes`] for a weight known to blend
     /// ([`SlerpWeight::is_blend`]); an endpoint weight gives zeros.
     #[inline(always)]
@@ -852,162 +865,26 @@ impl SlerpWeight {
     }
 }
 
-/// A [`SlerpWeight`] for interpolation trees normalized once at the root
-/// (the grid's trilinear tree): the same fitted polynomials and
-/// unnormalized blend as [`SlerpWeight::blend_lanes`], evaluated without
-/// `|d|` or a sign copy.
-///
-/// With `y = d²` the weights split into even and odd parts,
-/// `W(x) = E(y) + x·O(y)` with `x = |d|`, so the shortest-arc weights are
-/// `w0 = E0(y) + d·(s·O0(y))` and `w1 = s·W1(x) = s·E1(y) + d·O1(y)`, `s`
-/// the sign of `d`. The sign goes into the coefficients: row 0 is for a
-/// clear sign bit, row 1 the same with `O0` and `E1` negated, and each
-/// blend reads the row its dot's sign bit picks (on [`F4`] lanes,
-/// [`TreeLanes`]). The parts are evaluated as
-/// `(c0 + c1·y) + c2·y²`, the dot in sequence: other roundings than
-/// [`SlerpWeight::blend_lanes`] (a few ulp in the weights, against the
-/// fit's 7e-6), the same on every [`Lane`] type.
+/// A [`SlerpWeight`] whose polynomial coefficients are lane values
+/// ([`SlerpWeight::lanes`]): the same operations, so the same bits.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TreeWeight {
-    /// `[e0₀, e0₁, e0₂, o0₀, o0₁, o0₂, e1₀, e1₁, e1₂, o1₀, o1₁, o1₂]`
-    /// for a clear sign bit of the dot, then the twelve for a set one.
-    rows: [f32; 24],
+pub struct LaneWeight<T> {
+    w0: [T; 6],
+    w1: [T; 6],
     mode: SlerpMode,
 }
 
-impl TreeWeight {
-    /// The weight for `t` (clamped to `[0, 1]`): [`SlerpWeight::new`]'s
-    /// polynomials, rearranged and negated (no other evaluation).
-    #[must_use]
-    pub fn new(t: f32) -> Self {
-        let w = SlerpWeight::new(t);
-        let [a0, a1, a2, a3, a4, a5] = w.w0;
-        let [b0, b1, b2, b3, b4, b5] = w.w1;
-        Self {
-            rows: [
-                a0, a2, a4, a1, a3, a5, b0, b2, b4, b1, b3, b5, //
-                a0, a2, a4, -a1, -a3, -a5, -b0, -b2, -b4, b1, b3, b5,
-            ],
-            mode: w.mode,
-        }
-    }
-
-    /// Whether this weight blends (`0 < t < 1`) rather than returning an input.
-    #[inline]
-    #[must_use]
-    pub fn is_blend(&self) -> bool {
-        self.mode == SlerpMode::Mid
-    }
-
-    /// `w0·a + w1·b`, the unnormalized shortest-arc slerp of unit `a`, `b`
-    /// (length within 4e-6 of 1, see [`SlerpWeight::blend_lanes`]); the
-    /// endpoints return an input unchanged.
+impl<T: Lane> LaneWeight<T> {
+    /// [`SlerpWeight::blend_lanes`] with this weight.
     #[inline(always)]
     #[must_use]
-    pub fn blend_lanes(&self, a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+    pub fn blend_lanes(&self, a: [T; 4], b: [T; 4]) -> [T; 4] {
         match self.mode {
             SlerpMode::Start => a,
             SlerpMode::End => b,
-            SlerpMode::Mid => self.blend(a, b),
+            SlerpMode::Mid => blend(&self.w0, &self.w1, a, b),
         }
     }
-
-    /// [`TreeWeight::blend_lanes`] for a weight known to blend
-    /// ([`TreeWeight::is_blend`]); an endpoint weight gives zeros. The row
-    /// is picked by the dot's sign bit as an offset (no branch or select).
-    #[inline(always)]
-    #[must_use]
-    pub fn blend(&self, a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
-        let d = tree_dot(a, b);
-        let at = (d.to_bits() >> 31) as usize * 12;
-        let c = match self.rows.get(at..).and_then(<[f32]>::first_chunk::<12>) {
-            Some(row) => *row,
-            None => [0.0; 12],
-        };
-        tree_blend(c, d, a, b)
-    }
-
-    /// The weight for four lanes at a time, row 0 broadcast once.
-    #[inline]
-    #[must_use]
-    pub fn lanes(&self) -> TreeLanes {
-        let plus = self.rows.first_chunk::<12>().unwrap_or(&[0.0; 12]);
-        TreeLanes {
-            plus: plus.map(F4::splat),
-            mode: self.mode,
-        }
-    }
-}
-
-/// A [`TreeWeight`] on [`F4`] lanes ([`TreeWeight::lanes`]): each lane
-/// gets the row its dot's sign bit picks, by multiplying the coefficients
-/// row 1 negates by ±1 (exact), so the same bits as
-/// [`TreeWeight::blend_lanes`] lane by lane.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TreeLanes {
-    plus: [F4; 12],
-    mode: SlerpMode,
-}
-
-impl TreeLanes {
-    /// [`TreeWeight::blend_lanes`] on four lanes.
-    #[inline(always)]
-    #[must_use]
-    pub fn blend_lanes(&self, a: [F4; 4], b: [F4; 4]) -> [F4; 4] {
-        match self.mode {
-            SlerpMode::Start => a,
-            SlerpMode::End => b,
-            SlerpMode::Mid => {
-                let d = tree_dot(a, b);
-                // ±1 by the sign bit: multiplying by it negates exactly.
-                let sign = F4::splat(1.0).copysign(d);
-                let flip = |c: F4| c * sign;
-                let [c0, c1, c2, c3, c4, c5, c6, c7, c8, c9, c10, c11] = self.plus;
-                let c = [
-                    c0,
-                    c1,
-                    c2,
-                    flip(c3),
-                    flip(c4),
-                    flip(c5),
-                    flip(c6),
-                    flip(c7),
-                    flip(c8),
-                    c9,
-                    c10,
-                    c11,
-                ];
-                tree_blend(c, d, a, b)
-            }
-        }
-    }
-}
-
-/// The dot product of a [`TreeWeight`] blend, summed in sequence.
-#[inline(always)]
-fn tree_dot<T: Lane>(a: [T; 4], b: [T; 4]) -> T {
-    let [ax, ay, az, aw] = a;
-    let [bx, by, bz, bw] = b;
-    ((ax * bx + ay * by) + az * bz) + aw * bw
-}
-
-/// A [`TreeWeight`] blend from its dot `d` and the row `c` for `d`'s sign.
-#[inline(always)]
-fn tree_blend<T: Lane>(c: [T; 12], d: T, a: [T; 4], b: [T; 4]) -> [T; 4] {
-    let [ax, ay, az, aw] = a;
-    let [bx, by, bz, bw] = b;
-    let [e00, e01, e02, o00, o01, o02, e10, e11, e12, o10, o11, o12] = c;
-    let y = d * d;
-    let y2 = y * y;
-    let part = |c0: T, c1: T, c2: T| (c0 + c1 * y) + c2 * y2;
-    let w0 = part(e00, e01, e02) + d * part(o00, o01, o02);
-    let w1 = part(e10, e11, e12) + d * part(o10, o11, o12);
-    [
-        ax * w0 + bx * w1,
-        ay * w0 + by * w1,
-        az * w0 + bz * w1,
-        aw * w0 + bw * w1,
-    ]
 }
 
 /// The fast slerp's unnormalized blend `w0·a + w1·b` (see the module doc).

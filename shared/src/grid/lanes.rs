@@ -8,7 +8,7 @@ use glam::{Quat, Vec3};
 
 use super::general::Cubic;
 use super::{GridError, MAX_WINDOW, Samples};
-use crate::math::{F4, Lane, SlerpWeight, TreeLanes};
+use crate::math::{F4, Lane, LaneWeight, SlerpWeight};
 
 /// Reads the window of segments `first..first + positions.len()`:
 /// positions as the weighted sum (in window order), rotations into slot
@@ -97,7 +97,12 @@ pub(super) fn weigh(positions: &mut [Vec3], samples: &[Vec3], w: f32, first: boo
 /// `g[i] = blend(g[2i], g[2i+1])` for `i < len` on slots `lane..lane + 4` of
 /// each window group `g` (stride `B`).
 #[inline(always)]
-pub(super) fn blend_pairs<const B: usize>(buf: &mut Soa, w: &TreeLanes, len: usize, lane: usize) {
+pub(super) fn blend_pairs<const B: usize>(
+    buf: &mut Soa,
+    w: &LaneWeight<F4>,
+    len: usize,
+    lane: usize,
+) {
     for i in 0..len {
         let (a, b) = (buf.get4(2 * i * B + lane), buf.get4((2 * i + 1) * B + lane));
         if let (Some(a), Some(b)) = (a, b) {

@@ -458,8 +458,7 @@ impl Query {
         out.count = n;
         let positions = out.positions.get_mut(..n).unwrap_or(&mut []);
         let rotations = out.rotations.get_mut(..n).unwrap_or(&mut []);
-        // By reference: the tree is used where it was built (no copy).
-        match &self.trilinear() {
+        match self.trilinear() {
             Some(tree) => tree.pose(samples, (positions, rotations), wide),
             None => self.general(samples, (positions, rotations), wide),
         }

@@ -2,10 +2,9 @@
 //!
 //! The window is 2×2×2 and the rotation tree
 //! `z(y(x(q0, q1), x(q2, q3)), y(x(q4, q5), x(q6, q7)))`. Its slerps skip
-//! the normalization step of the fast slerp (a blend of unit inputs is
-//! already unit to within 4e-6) and take the shortest arc through their
-//! coefficients ([`crate::math::TreeWeight`]: the fast slerp's polynomials,
-//! no `|d|` or sign copy per blend); only the root is normalized, by the same
+//! the normalization step of the fast slerp
+//! ([`crate::math::SlerpWeight::blend_lanes`]: a blend of unit inputs is
+//! already unit to within 4e-6) and only the root is normalized, by the same
 //! Newton step ([`crate::math::renormalize_lanes`]); the result stays within
 //! the grid's stated bound (see [`crate::grid`]) and unit to within 1e-6
 //! (`tests/synth.rs`). When a level's coefficient is exactly 0 or 1 that
@@ -22,7 +21,7 @@ use glam::{Quat, Vec3};
 use super::lanes::{Soa, blend_pairs, fetch_block};
 use super::query::AxisQuery;
 use super::{GridError, MAX_WINDOW, Samples};
-use crate::math::{self, TreeLanes, TreeWeight};
+use crate::math::{self, F4, Lane, LaneWeight, SlerpWeight};
 
 /// The W&H hand grid, three linear axes: a 2×2×2 window and the tree
 /// `z(y(x(q0, q1), x(q2, q3)), y(x(q4, q5), x(q6, q7)))` of unnormalized
@@ -30,7 +29,7 @@ use crate::math::{self, TreeLanes, TreeWeight};
 pub(super) struct Trilinear {
     index: [u32; 8],
     weight: [f32; 8],
-    slerp: [TreeWeight; 3],
+    slerp: [SlerpWeight; 3],
     blends: bool,
 }
 
@@ -42,9 +41,9 @@ impl Trilinear {
         let at = |a: u32, b: u32, c: u32| a.wrapping_add(b).wrapping_add(c);
         // Written out, not `[..].map(..)` (an out-of-line loop at opt-level "s").
         let slerp = [
-            TreeWeight::new(x.t),
-            TreeWeight::new(y.t),
-            TreeWeight::new(z.t),
+            SlerpWeight::new(x.t),
+            SlerpWeight::new(y.t),
+            SlerpWeight::new(z.t),
         ];
         Self {
             index: [
@@ -67,7 +66,7 @@ impl Trilinear {
                 u0 * v1 * w1,
                 u1 * v1 * w1,
             ],
-            blends: slerp.iter().any(TreeWeight::is_blend),
+            blends: slerp.iter().any(SlerpWeight::is_blend),
             slerp,
         }
     }
@@ -98,7 +97,7 @@ impl Trilinear {
         rotations: &mut [Quat],
     ) -> Result<(), GridError> {
         let all = positions.iter_mut().zip(rotations.iter_mut());
-        let blends = self.slerp.iter().all(TreeWeight::is_blend);
+        let blends = self.slerp.iter().all(SlerpWeight::is_blend);
         if S::DECODES {
             // The whole window first (one copy of the decoder), then the tree.
             for (seg, (p, r)) in all.enumerate() {
@@ -191,8 +190,7 @@ impl Trilinear {
     ) -> Result<(), GridError> {
         const BLOCK: usize = MAX_WINDOW / 8;
         let mut buf = Soa::new();
-        let [x, y, z] = &self.slerp;
-        let levels = [x.lanes(), y.lanes(), z.lanes()];
+        let weights = self.slerp.each_ref().map(SlerpWeight::lanes::<F4>);
         let blocks = positions.chunks_mut(BLOCK).zip(rotations.chunks_mut(BLOCK));
         for (k, (p, r)) in blocks.enumerate() {
             let count = p.len();
@@ -200,7 +198,7 @@ impl Trilinear {
             fetch_block(samples, window, (k * BLOCK, BLOCK), p, &mut buf)?;
             for lane in [0, 4] {
                 if lane < count {
-                    self.tree_lanes::<BLOCK>(&levels, &mut buf, lane);
+                    self.tree_lanes::<BLOCK>(&weights, &mut buf, lane);
                 }
             }
             buf.store(r);
@@ -212,8 +210,13 @@ impl Trilinear {
     /// `[window][B]`, level by level in place; the results end up in slots
     /// `lane..lane + 4`.
     #[inline(always)]
-    fn tree_lanes<const B: usize>(&self, levels: &[TreeLanes; 3], buf: &mut Soa, lane: usize) {
-        let [x, y, z] = levels;
+    fn tree_lanes<const B: usize>(
+        &self,
+        weights: &[LaneWeight<F4>; 3],
+        buf: &mut Soa,
+        lane: usize,
+    ) {
+        let [x, y, z] = weights;
         blend_pairs::<B>(buf, x, 4, lane);
         blend_pairs::<B>(buf, y, 2, lane);
         blend_pairs::<B>(buf, z, 1, lane);
@@ -265,9 +268,9 @@ impl Trilinear {
         Ok((p, q))
     }
 
-    /// The rotation tree (with the endpoint checks).
+    /// The rotation tree on any lane type.
     #[inline(always)]
-    fn tree(&self, q: [[f32; 4]; 8]) -> [f32; 4] {
+    fn tree<T: Lane>(&self, q: [[T; 4]; 8]) -> [T; 4] {
         let [q0, q1, q2, q3, q4, q5, q6, q7] = q;
         let [x, y, z] = &self.slerp;
         let ab = y.blend_lanes(x.blend_lanes(q0, q1), x.blend_lanes(q2, q3));
