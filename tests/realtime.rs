@@ -324,3 +324,48 @@ fn the_warm_solve_at_1_khz_meets_every_goal_on_the_emulated_board() {
         row.instructions
     );
 }
+
+/// Budgets around what a 1 kHz `humanoid16` frame leaves the solver: how
+/// many frames iterate and how closely the goals follow the loop without a
+/// budget (README, "Real time", prints this table). More budget never
+/// follows worse, and below the least whole-tree iteration nothing
+/// iterates.
+#[test]
+fn the_budget_sweep_around_the_period() {
+    let inputs = inputs();
+    let free = native(&inputs.region, &inputs.session, FREE);
+    let segments = Region::parse(&inputs.region)
+        .rig
+        .map(|r| r.body().len())
+        .unwrap();
+    let left = deadline::frame_instructions(inputs.period_us, deadline::CLOCK_HZ)
+        .saturating_sub(deadline::reserve(segments, false));
+    let mut last_within = 0usize;
+    for b in [26_500, left, 28_500, 29_500, TIGHT] {
+        let held = native(&inputs.region, &inputs.session, Some(Budget::uniform(b)));
+        let iterated = held.iter().filter(|s| s.solve.iterations > 0).count();
+        let apart: Vec<f32> = held.iter().zip(&free).map(|(h, f)| apart(h, f)).collect();
+        let within = |t: f32| apart.iter().filter(|&&a| a <= t).count();
+        let f = follow(&held, &free);
+        let mut hand: Vec<f32> = held
+            .iter()
+            .filter_map(|s| s.residuals.first().copied())
+            .collect();
+        hand.sort_by(f32::total_cmp);
+        let n = held.len() as f64;
+        println!(
+            "budget {b}: {iterated} of {} frames iterate; within 0.1 mm {:.1} %, 1 mm {:.1} %; \
+             longest run off {}; first goal's residual median {:.1} mm",
+            held.len(),
+            within(1e-4) as f64 / n * 100.0,
+            within(1e-3) as f64 / n * 100.0,
+            f.longest,
+            hand.get(hand.len() / 2).copied().unwrap_or(f32::NAN) * 1e3
+        );
+        assert!(within(1e-4) >= last_within, "budget {b}");
+        last_within = within(1e-4);
+        if b == 26_500 {
+            assert_eq!(iterated, 0);
+        }
+    }
+}
