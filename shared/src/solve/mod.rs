@@ -37,42 +37,19 @@
 //! - [`RootMode::Fixed`] (a puppet on a stand): the body root never moves; the
 //!   chain from the body root to the reach-tree root is solved instead.
 //!
-//! ## Measured (CMU skeleton, root fixed, both hands and feet, 57 DOFs moving)
+//! ## Cost and quality
 //!
-//! `tests/benches/solve.rs` prints the full table. In short, from a synthesized
-//! start (goals ≤ 3 cm from a reachable pose): the greedy chain solver leaves
-//! goals 48 mm away on average (the triangle rule swings the whole spine and
-//! then hits limits: the "local minima" the paper warns of); CCD, chain DLS and
-//! tree DLS all meet every goal to [`Solver::DEFAULT`]'s 0.1 mm, in 55, 14.5
-//! and 4.9 µs on the host (tree DLS: 3 iterations). From the rest pose tree DLS
-//! meets all goals on 30 of 32 problems (chain DLS and CCD 25). On the
-//! emulated Cortex-M4F (instruction counts, not cycles, in the firmware's
-//! `opt-level = "s"` build), tree DLS takes about 95 k instructions cold
-//! ([`solve`], 3 iterations) and 61 k warm (goals moved ≤ 2 cm, [`solve_with`]
-//! with the [`SolverState`] of the previous frame, 2 iterations). One
-//! iteration moving all 19 joints costs about 24 k: the columns and their
-//! sums 7 k, forward kinematics of the 20 segments the goals hang from 5.3 k,
-//! the 3×3 blocks and the damping 4.5 k, the step and its limits 3.2 k (two
-//! rounds when a joint limit clamps), applying the step 1.7 k, the
-//! factorisation and the substitutions 1 k, the bookkeeping 2 k; an
-//! iteration after the feet are met moves only the arms and the spine. The
-//! iteration count is set by the problem's curvature, not the damping: from
-//! goals up to 10 cm away the steps leave 12 mm, 0.8 mm and 0.01 mm (ten
-//! times less damping: 11 mm, 0.6 mm, 0.01 mm; a chord step, the last
-//! linearisation reused for the new residuals, leaves far more than a new
-//! one: 12 → 3.3 mm, 0.8 → 0.14 mm); from goals 1.2 cm away the hands are
-//! left 1.5 and 1.7 mm away, then 0.03 mm. That first step's own linear
-//! model misses the hands by 2.5 mm (measured along the step), and an
-//! undamped minimum-norm Gauss–Newton step in `f64` from the same start
-//! leaves them 2.9 and 4.7 mm away: a 2 cm move needs two iterations. A fresh working state
-//! costs about 9.5 k before the first iteration (clearing its 13.6 kB 4.8 k,
-//! the joint layout 2.8 k, checking and clamping the angles 1.9 k) and the
-//! first forward kinematics 5.3 k; a kept state skips the clearing and the
-//! layout while the goals stay on the same segments, and a start at the last
-//! solution skips the sines and cosines of the first forward kinematics
-//! (each joint's rotation is kept with its angles), leaving about 2.5 k of
-//! it. The final pose (the 11 segments off the goals' paths) and the report
-//! cost about 2.5 k. Fewer moving DOFs or goals cost proportionally less.
+//! One whole-tree iteration computes a forward kinematics of the segments
+//! the goals hang from, a Jacobian column per moving DOF and goal, the 3×3
+//! blocks of the goal-space system and their factorisation, and the step
+//! with its joint limits; its work grows with the moving DOFs, the goals
+//! and the goal rows each joint moves. A kept [`SolverState`] skips
+//! clearing the working state and laying out the joints while the goals
+//! stay on the same segments, and a start at the last solution skips the
+//! sines and cosines of the first forward kinematics. What the methods
+//! cost and reach on the CMU skeleton (host time, Cortex-M4F instruction
+//! counts, goals met) is measured in README's "Measured" section, with the
+//! commands (`tests/benches/solve.rs`, `marionette icount`).
 //!
 //! Tree DLS is a local method: on 100 random CMU goal sets (`tests/solve.rs`)
 //! it ends at a local optimum every time, and with [`Solver::restarts`] = 3
