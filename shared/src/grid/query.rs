@@ -292,13 +292,6 @@ impl<'a> Grid<'a> {
             *s = at(a, 0);
         }
         let row0 = cache.first().map_or(&[][..], |r| &r[..]);
-        let mask = self.valid;
-        let valid = |c: u32| match mask {
-            Some(m) => m
-                .get((c >> 3) as usize)
-                .is_some_and(|b| b >> (c & 7) & 1 == 1),
-            None => true,
-        };
         let mut best: Option<(f32, u32)> = None;
         let mut row = 0u32;
         while row < self.cells {
@@ -316,7 +309,7 @@ impl<'a> Grid<'a> {
             // length.
             for k in 0..row_len {
                 let c = row.wrapping_add(k);
-                if !valid(c) {
+                if !self.cell_valid(c as usize) {
                     continue;
                 }
                 let d0 = match row0.get(k as usize) {
