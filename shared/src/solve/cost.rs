@@ -104,15 +104,19 @@ pub enum Term {
     Reject,
     /// Per moving group, per step applied.
     Apply,
+    /// Per path segment, per step tried: keeping its placement.
+    Keep,
+    /// Per path segment, per rejected step: putting its placement back.
+    Rewind,
 }
 
 /// Number of terms.
-pub const TERMS: usize = 28;
+pub const TERMS: usize = 30;
 
 /// Instructions per unit of each term, in [`Term`] order.
 pub const COST: [u32; TERMS] = [
     3945, 10, 360, 0, 0, 175, 112, 184, 30, 60, 203, 60, 11, 802, 71, 205, 54, 40, 93, 24, 100,
-    483, 183, 59, 33, 0, 0, 187,
+    483, 183, 59, 33, 0, 0, 187, 30, 30,
 ];
 
 /// The cost of `count` units of `term`. The sizes the solver counts are

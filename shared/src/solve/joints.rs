@@ -120,6 +120,8 @@ pub(super) struct Dofs {
     pub delta: Vec3,
     /// The values before the step.
     back: Vec3,
+    /// The group's `turn` before the step.
+    back_turn: (f32, f32),
     pub lever: f32,
 }
 
@@ -158,6 +160,7 @@ const NO_DOFS: Dofs = Dofs {
     inv_d: Vec3::ZERO,
     delta: Vec3::ZERO,
     back: Vec3::ZERO,
+    back_turn: (0.0, 0.0),
     lever: 0.0,
 };
 const NO_LINK: Link = Link {
@@ -222,6 +225,16 @@ pub(super) struct Joints<const N: usize> {
     path: u64,
     /// The root position before the step.
     back_root: Vec3,
+    /// The world placement before the step of the segments the step's
+    /// first forward kinematics placed again (the first `back_placed` of
+    /// `back_segments`), to go back to without placing them again. Kept by
+    /// the forward kinematics when `keeping`; the later ones of the same
+    /// step place the same segments (the same groups moved).
+    back_positions: [Vec3; N],
+    back_rotations: [Quat; N],
+    back_segments: [u8; N],
+    back_placed: usize,
+    keeping: bool,
     /// Bit `j`: slot `j` is not met; sets the live groups
     /// ([`Joints::settle`]).
     unmet: u16,
@@ -258,6 +271,11 @@ impl<const N: usize> Joints<N> {
         nodes: 0,
         path: 0,
         back_root: Vec3::ZERO,
+        back_positions: [Vec3::ZERO; N],
+        back_rotations: [Quat::IDENTITY; N],
+        back_segments: [0; N],
+        back_placed: 0,
+        keeping: false,
         unmet: 0,
         reach: 0,
         root_moved: false,
@@ -380,8 +398,15 @@ impl<const N: usize> Joints<N> {
     /// Applies the step (each DOF's `delta`), scaled to at most `max_step`
     /// (rad or m), clamped into the limits. With `keep`, first keeps the
     /// values of the moving DOFs and the root position, to go back to with
-    /// [`Joints::back`].
+    /// [`Joints::back`], and until [`Joints::rewind`] (or a new start) the
+    /// forward kinematics keeps the placement of each segment it places
+    /// again, to go back to with [`Joints::rewind`] (the pose in the work
+    /// must then be that of the angles: placed by [`Joints::forward`] since
+    /// they last changed).
     pub fn apply(&mut self, work: &mut Work<'_, '_, N>, max_step: f32, keep: bool) {
+        if keep {
+            (self.keeping, self.back_placed) = (true, 0);
+        }
         let n = self.count;
         let dofs = self.dofs.get(..n).unwrap_or(&[]).iter();
         let biggest = dofs.fold(0.0f32, |m, d| math::max(d.delta.abs().max_element(), m));
@@ -408,6 +433,7 @@ impl<const N: usize> Joints<N> {
             if let Some(values) = work.angles.get_mut(usize::from(g.seg)) {
                 if keep {
                     d.back = Vec3::from_array(*values);
+                    d.back_turn = g.turn;
                 }
                 // By count, without an iterator (opt-level "s").
                 let (step, [x, y, z]) = (d.delta * scale, *values);
@@ -442,6 +468,42 @@ impl<const N: usize> Joints<N> {
         }
     }
 
+    /// Goes back to the values and the placement of the path that
+    /// [`Joints::apply`] kept: the pose it would place again, bit for bit
+    /// (forward kinematics is a function of the angles), without placing
+    /// it.
+    pub fn rewind(&mut self, work: &mut Work<'_, '_, N>) {
+        work.angles.root_position = self.back_root;
+        for (d, g) in self.dofs.iter().zip(&mut self.groups).take(self.count) {
+            g.moved = false;
+            let s = usize::from(g.seg);
+            if !g.live || g.translation() {
+                continue;
+            }
+            if let Some(x) = work.angles.get_mut(s) {
+                *x = d.back.to_array();
+            }
+            // The rotation kept is the step's (a later placement at these
+            // angles would not set `turn`): computed again when next needed.
+            g.turn = d.back_turn;
+            if let Some(kept) = self.local.get_mut(s) {
+                *kept = Local::NONE;
+            }
+        }
+        self.root_moved = false;
+        self.keeping = false;
+        let kept = self.back_positions.iter().zip(&self.back_rotations);
+        for ((&kp, &kr), &s) in kept.zip(&self.back_segments).take(self.back_placed) {
+            let s = usize::from(s);
+            if let (Some(op), Some(or)) = (
+                work.pose.positions.get_mut(s),
+                work.pose.rotations.get_mut(s),
+            ) {
+                (*op, *or) = (kp, kr);
+            }
+        }
+    }
+
     /// The values of the moving DOFs and the root position.
     pub fn save(&self, work: &Work<'_, '_, N>) -> Saved<N> {
         let mut out = Saved {
@@ -456,7 +518,7 @@ impl<const N: usize> Joints<N> {
 
     /// Puts back what [`Joints::save`] took.
     pub fn restore(&mut self, work: &mut Work<'_, '_, N>, saved: &Saved<N>) {
-        self.placed = false;
+        (self.placed, self.keeping) = (false, false);
         work.angles.root_position = saved.root;
         for (v, g) in saved.values.iter().zip(self.groups()) {
             if let Some(x) = work.angles.get_mut(usize::from(g.seg)) {
@@ -534,7 +596,7 @@ impl<const N: usize> Joints<N> {
     /// Marks every segment as changed: the next [`Joints::forward`] places
     /// the whole path (the pose in `work` is not yet that of the angles).
     pub fn unplaced(&mut self) {
-        self.placed = false;
+        (self.placed, self.keeping) = (false, false);
     }
 
     /// Forward kinematics of the path segments: the world placement (into
@@ -573,11 +635,22 @@ impl<const N: usize> Joints<N> {
                 work.pose.positions.get_mut(s),
                 work.pose.rotations.get_mut(s),
             ) {
+                let k = self.back_placed;
+                if self.keeping
+                    && let (Some(kp), Some(kr), Some(ks)) = (
+                        self.back_positions.get_mut(k),
+                        self.back_rotations.get_mut(k),
+                        self.back_segments.get_mut(k),
+                    )
+                {
+                    (*kp, *kr, *ks) = (*op, *or, s as u8);
+                    self.back_placed = k + 1;
+                }
                 *op = p;
                 *or = r;
             }
         }
-        (self.placed, self.root_moved) = (true, false);
+        (self.placed, self.root_moved, self.keeping) = (true, false, false);
     }
 
     /// The world placement of the segments off the path.
@@ -1066,5 +1139,100 @@ mod tests {
             }
         }
         assert!(checked > 20, "{checked}");
+    }
+
+    /// A rejected step goes back without placing the path again: after one
+    /// or two trial placements, [`Joints::rewind`] leaves the angles, the
+    /// pose and each group's geometry as they were, bit for bit; the same
+    /// step again places and turns as it did, and another step's placement
+    /// is the whole-body forward kinematics (`Angles::forward`, the slow
+    /// obvious one) of its angles.
+    #[test]
+    fn rewind_puts_back_what_the_step_placed() {
+        let body = cmu::BODY;
+        let bits = |p: &Pose<32>| {
+            let ps = p
+                .positions
+                .iter()
+                .flat_map(|v| v.to_array().map(f32::to_bits));
+            let qs = p
+                .rotations
+                .iter()
+                .flat_map(|q| q.to_array().map(f32::to_bits));
+            let mut out = [0u32; 32 * 7];
+            for (o, b) in out.iter_mut().zip(ps.chain(qs)) {
+                *o = b;
+            }
+            out
+        };
+        for (root, trials) in [(RootMode::Fixed, 1), (RootMode::Float, 2)] {
+            let mut a = Angles::<32>::rest(&body).unwrap();
+            for (i, v) in a.values.iter_mut().flat_map(|v| v.iter_mut()).enumerate() {
+                *v = 0.3 * ((i as f32) * 0.7).sin();
+            }
+            a.clamp_to_limits(&body);
+            let goals = [
+                Goal::reach(cmu::index::LEFT_HAND, Vec3::new(0.3, 1.0, 0.2), 1.0),
+                Goal::reach(cmu::index::RIGHT_FOOT, Vec3::new(-0.1, 0.0, 0.1), 4.0),
+            ];
+            let (mut pose, mut angles) = (Pose::<32>::default(), a);
+            let mut work = Work::new(&body, &goals, &mut angles, &mut pose);
+            work.check().unwrap();
+            let mut slots = Slots::EMPTY;
+            slots.init(&goals, 4.0).unwrap();
+            let mut joints = Joints::<32>::EMPTY;
+            joints.init(&Solver::DEFAULT.with_root(root), &work, &slots);
+            joints.forward(&mut work);
+            slots.evaluate(&work).unwrap();
+            joints.settle(&slots, 0.0);
+            let before = (
+                bits(work.pose),
+                work.angles.values,
+                work.angles.root_position,
+            );
+            let geometry_of = |work: &Work<'_, '_, 32>, joints: &Joints<32>| {
+                let mut out = [(Vec3::ZERO, [Vec3::ZERO; 3]); 32];
+                for (o, g) in out.iter_mut().zip(joints.groups()) {
+                    *o = geometry(work, g);
+                }
+                out
+            };
+            let axes = geometry_of(&work, &joints);
+            let step = |joints: &mut Joints<32>, k: f32| {
+                for (i, d) in joints.dofs.iter_mut().enumerate() {
+                    d.delta = Vec3::splat(0.05 * k * ((i as f32) * 1.3).cos());
+                }
+            };
+            step(&mut joints, 1.0);
+            joints.apply(&mut work, 1.0, true);
+            joints.forward(&mut work);
+            let tried = (bits(work.pose), geometry_of(&work, &joints));
+            if trials == 2 {
+                joints.apply(&mut work, 1.0, false);
+                joints.forward(&mut work);
+            }
+            assert_ne!(bits(work.pose), before.0);
+            joints.rewind(&mut work);
+            assert_eq!(bits(work.pose), before.0, "{root:?}");
+            assert_eq!(work.angles.values, before.1);
+            assert_eq!(work.angles.root_position, before.2);
+            assert_eq!(geometry_of(&work, &joints), axes);
+            // The same step again: the same pose and geometry as the first
+            // time.
+            joints.apply(&mut work, 1.0, true);
+            joints.forward(&mut work);
+            assert_eq!((bits(work.pose), geometry_of(&work, &joints)), tried);
+            joints.rewind(&mut work);
+            // The next step places what the whole-body forward kinematics does.
+            step(&mut joints, -1.0);
+            joints.apply(&mut work, 1.0, true);
+            joints.forward(&mut work);
+            let (mut l, mut p) = (LocalPose::<32>::default(), Pose::<32>::default());
+            work.angles.forward(&body, &mut l, &mut p).unwrap();
+            for s in (0..body.len()).filter(|&s| joints.path >> s & 1 != 0) {
+                assert_eq!(work.pose.positions[s], p.positions[s], "{root:?} {s}");
+                assert_eq!(work.pose.rotations[s], p.rotations[s], "{root:?} {s}");
+            }
+        }
     }
 }

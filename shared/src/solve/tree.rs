@@ -79,6 +79,8 @@ struct Prices {
     linearise: Tally,
     /// A trial step: applying it, forward kinematics and the goals.
     trial: Tally,
+    /// Keeping the pose before the trials.
+    keep: Tally,
     /// Going back from a rejected trial.
     reject: Tally,
     /// A round of a step (assembling the system).
@@ -97,6 +99,7 @@ impl Prices {
         base: Tally::NONE,
         linearise: Tally::NONE,
         trial: Tally::NONE,
+        keep: Tally::NONE,
         reject: Tally::NONE,
         round: Tally::NONE,
         pass: Tally::NONE,
@@ -259,6 +262,7 @@ impl<const N: usize> Lm<N> {
         let live = self.joints.live;
         let (groups, g) = (self.joints.count, self.slots.count);
         let refresh = self.refresh_work(live.dofs);
+        let path = self.joints.path_len();
         let (blocks, products) = self.system.most;
         self.prices = Prices {
             base: Tally::NONE
@@ -269,7 +273,10 @@ impl<const N: usize> Lm<N> {
                 .with(Term::LiveDof, live.dofs)
                 .with(Term::LinkDof, live.link_dofs),
             trial: refresh.with(Term::Apply, groups),
-            reject: refresh.with(Term::Reject, groups),
+            keep: Tally::NONE.with(Term::Keep, path),
+            reject: eval_work(g, self.slots.simple)
+                .with(Term::Rewind, path)
+                .with(Term::Reject, groups),
             round: Tally::NONE
                 .with(Term::Pair, live.pairs)
                 .with(Term::Block, g * g),
@@ -294,7 +301,7 @@ impl<const N: usize> Lm<N> {
     fn plan(&self, solver: &Solver, fresh: bool, left: u32) -> Option<(usize, usize)> {
         let p = &self.prices;
         let trials = if solver.extrapolate { 3 } else { 1 };
-        let mut fixed = p.base.plus(&p.couple).plus(&p.reject);
+        let mut fixed = p.base.plus(&p.couple).plus(&p.keep).plus(&p.reject);
         fixed = fixed.plus(&p.trial.times(trials));
         if fresh {
             fixed = fixed.plus(&p.linearise);
@@ -326,6 +333,9 @@ impl<const N: usize> Lm<N> {
             .plus(&p.round.times(rounds))
             .plus(&p.pass.times(passes))
             .plus(&p.trial.times(trials));
+        if trials > 0 {
+            t = t.plus(&p.keep);
+        }
         if fresh {
             t = t.plus(&p.linearise);
         }
@@ -398,8 +408,10 @@ impl<const N: usize> Lm<N> {
                     return Ok((iterations, true));
                 }
             } else {
-                self.joints.back(work);
-                self.refresh(work)?;
+                // The pose put back, the goals evaluated again (fewer
+                // instructions than keeping them for every trial).
+                self.joints.rewind(work);
+                self.slots.evaluate(work)?;
                 self.slots.keep();
                 lambda *= 4.0;
                 if lambda > MAX_DAMPING {
