@@ -104,9 +104,11 @@ pub enum Term {
     Reject,
     /// Per moving group, per step applied.
     Apply,
-    /// Per path segment, per step tried: keeping its placement.
+    /// Per segment up to the path's last, per step that keeps the pose
+    /// before its trials.
     Keep,
-    /// Per path segment, per rejected step: putting its placement back.
+    /// Per segment up to the path's last, per rejected step that puts the
+    /// kept pose back.
     Rewind,
 }
 

@@ -225,16 +225,11 @@ pub(super) struct Joints<const N: usize> {
     path: u64,
     /// The root position before the step.
     back_root: Vec3,
-    /// The world placement before the step of the segments the step's
-    /// first forward kinematics placed again (the first `back_placed` of
-    /// `back_segments`), to go back to without placing them again. Kept by
-    /// the forward kinematics when `keeping`; the later ones of the same
-    /// step place the same segments (the same groups moved).
+    /// The world placement of the segments up to the path's last before
+    /// the step ([`Joints::keep_pose`]), to go back to without placing them
+    /// again.
     back_positions: [Vec3; N],
     back_rotations: [Quat; N],
-    back_segments: [u8; N],
-    back_placed: usize,
-    keeping: bool,
     /// Bit `j`: slot `j` is not met; sets the live groups
     /// ([`Joints::settle`]).
     unmet: u16,
@@ -273,9 +268,6 @@ impl<const N: usize> Joints<N> {
         back_root: Vec3::ZERO,
         back_positions: [Vec3::ZERO; N],
         back_rotations: [Quat::IDENTITY; N],
-        back_segments: [0; N],
-        back_placed: 0,
-        keeping: false,
         unmet: 0,
         reach: 0,
         root_moved: false,
@@ -398,15 +390,8 @@ impl<const N: usize> Joints<N> {
     /// Applies the step (each DOF's `delta`), scaled to at most `max_step`
     /// (rad or m), clamped into the limits. With `keep`, first keeps the
     /// values of the moving DOFs and the root position, to go back to with
-    /// [`Joints::back`], and until [`Joints::rewind`] (or a new start) the
-    /// forward kinematics keeps the placement of each segment it places
-    /// again, to go back to with [`Joints::rewind`] (the pose in the work
-    /// must then be that of the angles: placed by [`Joints::forward`] since
-    /// they last changed).
+    /// [`Joints::back`] or [`Joints::rewind`].
     pub fn apply(&mut self, work: &mut Work<'_, '_, N>, max_step: f32, keep: bool) {
-        if keep {
-            (self.keeping, self.back_placed) = (true, 0);
-        }
         let n = self.count;
         let dofs = self.dofs.get(..n).unwrap_or(&[]).iter();
         let biggest = dofs.fold(0.0f32, |m, d| math::max(d.delta.abs().max_element(), m));
@@ -468,10 +453,33 @@ impl<const N: usize> Joints<N> {
         }
     }
 
-    /// Goes back to the values and the placement of the path that
-    /// [`Joints::apply`] kept: the pose it would place again, bit for bit
-    /// (forward kinematics is a function of the angles), without placing
-    /// it.
+    /// The segments up to the path's last: the range [`Joints::keep_pose`]
+    /// copies (whole, in fewer instructions than the path segment by
+    /// segment).
+    pub fn path_span(&self) -> usize {
+        (64 - self.path.leading_zeros() as usize).min(N)
+    }
+
+    /// Keeps the placement of the segments up to the path's last, to go
+    /// back to with [`Joints::rewind`] (the pose in the work must be that
+    /// of the angles: placed by [`Joints::forward`] since they changed).
+    pub fn keep_pose(&mut self, work: &Work<'_, '_, N>) {
+        let n = self.path_span();
+        if let (Some(kp), Some(p), Some(kr), Some(r)) = (
+            self.back_positions.get_mut(..n),
+            work.pose.positions.get(..n),
+            self.back_rotations.get_mut(..n),
+            work.pose.rotations.get(..n),
+        ) {
+            kp.copy_from_slice(p);
+            kr.copy_from_slice(r);
+        }
+    }
+
+    /// Goes back to the values [`Joints::apply`] kept and the placement
+    /// [`Joints::keep_pose`] kept before it: the pose forward kinematics
+    /// would place again, bit for bit (it is a function of the angles),
+    /// without placing it.
     pub fn rewind(&mut self, work: &mut Work<'_, '_, N>) {
         work.angles.root_position = self.back_root;
         for (d, g) in self.dofs.iter().zip(&mut self.groups).take(self.count) {
@@ -491,16 +499,15 @@ impl<const N: usize> Joints<N> {
             }
         }
         self.root_moved = false;
-        self.keeping = false;
-        let kept = self.back_positions.iter().zip(&self.back_rotations);
-        for ((&kp, &kr), &s) in kept.zip(&self.back_segments).take(self.back_placed) {
-            let s = usize::from(s);
-            if let (Some(op), Some(or)) = (
-                work.pose.positions.get_mut(s),
-                work.pose.rotations.get_mut(s),
-            ) {
-                (*op, *or) = (kp, kr);
-            }
+        let n = self.path_span();
+        if let (Some(kp), Some(p), Some(kr), Some(r)) = (
+            self.back_positions.get(..n),
+            work.pose.positions.get_mut(..n),
+            self.back_rotations.get(..n),
+            work.pose.rotations.get_mut(..n),
+        ) {
+            p.copy_from_slice(kp);
+            r.copy_from_slice(kr);
         }
     }
 
@@ -518,7 +525,7 @@ impl<const N: usize> Joints<N> {
 
     /// Puts back what [`Joints::save`] took.
     pub fn restore(&mut self, work: &mut Work<'_, '_, N>, saved: &Saved<N>) {
-        (self.placed, self.keeping) = (false, false);
+        self.placed = false;
         work.angles.root_position = saved.root;
         for (v, g) in saved.values.iter().zip(self.groups()) {
             if let Some(x) = work.angles.get_mut(usize::from(g.seg)) {
@@ -596,7 +603,7 @@ impl<const N: usize> Joints<N> {
     /// Marks every segment as changed: the next [`Joints::forward`] places
     /// the whole path (the pose in `work` is not yet that of the angles).
     pub fn unplaced(&mut self) {
-        (self.placed, self.keeping) = (false, false);
+        self.placed = false;
     }
 
     /// Forward kinematics of the path segments: the world placement (into
@@ -635,22 +642,11 @@ impl<const N: usize> Joints<N> {
                 work.pose.positions.get_mut(s),
                 work.pose.rotations.get_mut(s),
             ) {
-                let k = self.back_placed;
-                if self.keeping
-                    && let (Some(kp), Some(kr), Some(ks)) = (
-                        self.back_positions.get_mut(k),
-                        self.back_rotations.get_mut(k),
-                        self.back_segments.get_mut(k),
-                    )
-                {
-                    (*kp, *kr, *ks) = (*op, *or, s as u8);
-                    self.back_placed = k + 1;
-                }
                 *op = p;
                 *or = r;
             }
         }
-        (self.placed, self.root_moved, self.keeping) = (true, false, false);
+        (self.placed, self.root_moved) = (true, false);
     }
 
     /// The world placement of the segments off the path.
@@ -1204,6 +1200,7 @@ mod tests {
                 }
             };
             step(&mut joints, 1.0);
+            joints.keep_pose(&work);
             joints.apply(&mut work, 1.0, true);
             joints.forward(&mut work);
             let tried = (bits(work.pose), geometry_of(&work, &joints));
@@ -1219,6 +1216,7 @@ mod tests {
             assert_eq!(geometry_of(&work, &joints), axes);
             // The same step again: the same pose and geometry as the first
             // time.
+            joints.keep_pose(&work);
             joints.apply(&mut work, 1.0, true);
             joints.forward(&mut work);
             assert_eq!((bits(work.pose), geometry_of(&work, &joints)), tried);

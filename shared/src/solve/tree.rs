@@ -81,8 +81,10 @@ struct Prices {
     trial: Tally,
     /// Keeping the pose before the trials.
     keep: Tally,
-    /// Going back from a rejected trial.
+    /// Going back from a rejected trial by placing the path again.
     reject: Tally,
+    /// Going back from a rejected trial to the kept pose.
+    rewind: Tally,
     /// A round of a step (assembling the system).
     round: Tally,
     /// A factorisation pass (with the clamping at the limits).
@@ -93,6 +95,11 @@ struct Prices {
     planes: bool,
 }
 
+/// What an iteration may do: its rounds, its passes per round, and whether
+/// it keeps the pose before its trials (to undo a rejection by putting it
+/// back rather than placing the path again).
+type Plan = (usize, usize, bool);
+
 impl Prices {
     /// Nothing priced yet.
     const NONE: Prices = Prices {
@@ -101,6 +108,7 @@ impl Prices {
         trial: Tally::NONE,
         keep: Tally::NONE,
         reject: Tally::NONE,
+        rewind: Tally::NONE,
         round: Tally::NONE,
         pass: Tally::NONE,
         couple: Tally::NONE,
@@ -262,7 +270,7 @@ impl<const N: usize> Lm<N> {
         let live = self.joints.live;
         let (groups, g) = (self.joints.count, self.slots.count);
         let refresh = self.refresh_work(live.dofs);
-        let path = self.joints.path_len();
+        let span = self.joints.path_span();
         let (blocks, products) = self.system.most;
         self.prices = Prices {
             base: Tally::NONE
@@ -273,9 +281,10 @@ impl<const N: usize> Lm<N> {
                 .with(Term::LiveDof, live.dofs)
                 .with(Term::LinkDof, live.link_dofs),
             trial: refresh.with(Term::Apply, groups),
-            keep: Tally::NONE.with(Term::Keep, path),
-            reject: eval_work(g, self.slots.simple)
-                .with(Term::Rewind, path)
+            keep: Tally::NONE.with(Term::Keep, span),
+            reject: refresh.with(Term::Reject, groups),
+            rewind: eval_work(g, self.slots.simple)
+                .with(Term::Rewind, span)
                 .with(Term::Reject, groups),
             round: Tally::NONE
                 .with(Term::Pair, live.pairs)
@@ -297,15 +306,32 @@ impl<const N: usize> Lm<N> {
     /// The most a next iteration can do within `left`: its rounds (2 when a
     /// one-sided plane may wake) and its factorisation passes per round (up
     /// to [`CLAMP_PASSES`]), with its trials, finding the coupling and a
-    /// rejection reserved; `None` if not even one pass fits.
-    fn plan(&self, solver: &Solver, fresh: bool, left: u32) -> Option<(usize, usize)> {
+    /// rejection reserved; `None` if not even one pass fits. A rejection is
+    /// undone by placing the path again, or, where keeping the pose before
+    /// the trials buys more passes, by putting the kept pose back (the third
+    /// of the plan: keep).
+    fn plan(&self, solver: &Solver, fresh: bool, left: u32) -> Option<Plan> {
         let p = &self.prices;
         let trials = if solver.extrapolate { 3 } else { 1 };
-        let mut fixed = p.base.plus(&p.couple).plus(&p.keep).plus(&p.reject);
-        fixed = fixed.plus(&p.trial.times(trials));
+        let mut fixed = p.base.plus(&p.couple).plus(&p.trial.times(trials));
         if fresh {
             fixed = fixed.plus(&p.linearise);
         }
+        let placed = self.most(&fixed.plus(&p.reject), left);
+        if placed.is_some_and(|(_, passes)| passes == CLAMP_PASSES) {
+            return placed.map(|(r, passes)| (r, passes, false));
+        }
+        let kept = self.most(&fixed.plus(&p.keep).plus(&p.rewind), left);
+        match (placed, kept) {
+            (Some(a), Some(b)) if b > a => Some((b.0, b.1, true)),
+            (None, Some(b)) => Some((b.0, b.1, true)),
+            (a, _) => a.map(|(r, passes)| (r, passes, false)),
+        }
+    }
+
+    /// The most rounds and passes per round that fit `left` after `fixed`.
+    fn most(&self, fixed: &Tally, left: u32) -> Option<(usize, usize)> {
+        let p = &self.prices;
         let pass = p.pass.cost().max(1);
         let most = if p.planes { 2 } else { 1 };
         (1..=most).rev().find_map(|rounds| {
@@ -319,12 +345,13 @@ impl<const N: usize> Lm<N> {
 
     /// The work of an iteration: a linearisation if `fresh`, a step of
     /// `(rounds, passes, coupling found again)`, `trials` forward
-    /// kinematics, and going back if `rejected`.
+    /// kinematics (the pose kept before them if `kept`), and going back if
+    /// `rejected`.
     fn iteration_work(
         &self,
         fresh: bool,
         (rounds, passes, couple): (usize, usize, bool),
-        trials: usize,
+        (trials, kept): (usize, bool),
         rejected: bool,
     ) -> Tally {
         let p = &self.prices;
@@ -333,19 +360,20 @@ impl<const N: usize> Lm<N> {
             .plus(&p.round.times(rounds))
             .plus(&p.pass.times(passes))
             .plus(&p.trial.times(trials));
-        if trials > 0 {
-            t = t.plus(&p.keep);
-        }
         if fresh {
             t = t.plus(&p.linearise);
         }
         if couple {
             t = t.plus(&p.couple);
         }
-        if rejected {
-            t = t.plus(&p.reject);
+        if trials > 0 && kept {
+            t = t.plus(&p.keep);
         }
-        t
+        match (rejected, kept) {
+            (true, true) => t.plus(&p.rewind),
+            (true, false) => t.plus(&p.reject),
+            (false, _) => t,
+        }
     }
 
     /// Levenberg–Marquardt from the current angles; returns (iterations,
@@ -372,7 +400,7 @@ impl<const N: usize> Lm<N> {
                 self.joints.settle(&self.slots, tol2);
                 self.price();
             }
-            let Some(plan) = self.plan(solver, fresh, meter.left()) else {
+            let Some((rounds, passes, kept)) = self.plan(solver, fresh, meter.left()) else {
                 // Out of work: what is left is for the next solve.
                 return Ok((iterations, false));
             };
@@ -388,17 +416,22 @@ impl<const N: usize> Lm<N> {
                 &self.slots,
                 &mut self.rhs,
                 lambda * lambda,
-                plan,
+                (rounds, passes),
             );
             if !stepped {
-                meter.add_tally(&self.iteration_work(linearised, self.system.work, 0, false));
+                let work = self.iteration_work(linearised, self.system.work, (0, kept), false);
+                meter.add_tally(&work);
                 lambda *= 4.0;
                 continue;
             }
             let error = self.slots.error;
+            if kept {
+                self.joints.keep_pose(work);
+            }
             let trials = self.trial(solver, work)?;
             let accepted = self.slots.error < error;
-            meter.add_tally(&self.iteration_work(linearised, self.system.work, trials, !accepted));
+            let done = (trials, kept);
+            meter.add_tally(&self.iteration_work(linearised, self.system.work, done, !accepted));
             if accepted {
                 let moved = self.slots.accept();
                 fresh = true;
@@ -408,10 +441,15 @@ impl<const N: usize> Lm<N> {
                     return Ok((iterations, true));
                 }
             } else {
-                // The pose put back, the goals evaluated again (fewer
-                // instructions than keeping them for every trial).
-                self.joints.rewind(work);
-                self.slots.evaluate(work)?;
+                if kept {
+                    // The pose put back, the goals evaluated again (fewer
+                    // instructions than keeping them for every trial).
+                    self.joints.rewind(work);
+                    self.slots.evaluate(work)?;
+                } else {
+                    self.joints.back(work);
+                    self.refresh(work)?;
+                }
                 self.slots.keep();
                 lambda *= 4.0;
                 if lambda > MAX_DAMPING {
