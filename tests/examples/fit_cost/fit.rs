@@ -109,7 +109,11 @@ pub fn fit(solves: &[Solve], terms: usize) -> Result<Fit, FitError> {
         .zip(&scale)
         .map(|(&j, &k)| solves.iter().map(|s| per(s, j) / k).collect())
         .collect();
-    let b: Vec<f64> = used.iter().zip(&scale).map(|(&j, k)| weight[j] / k).collect();
+    let b: Vec<f64> = used
+        .iter()
+        .zip(&scale)
+        .map(|(&j, k)| weight[j] / k)
+        .collect();
     let optimum = simplex::maximise(&a, &b, &vec![1.0; solves.len()])?;
     let mut exact = vec![0.0; terms];
     for ((&j, k), y) in used.iter().zip(&scale).zip(&optimum.duals) {
@@ -123,20 +127,37 @@ pub fn fit(solves: &[Solve], terms: usize) -> Result<Fit, FitError> {
         weight,
         pivots: optimum.pivots,
     };
-    certify(&fit, solves, optimum.value)?;
+    certify(&fit, solves, &optimum.x)?;
     Ok(fit)
 }
 
-/// Checks the optimum without the simplex: the coefficients are ≥ 0 and
-/// bound every solve, and their objective equals the dual's value (weak
-/// duality makes both optimal).
-fn certify(fit: &Fit, solves: &[Solve], dual: f64) -> Result<(), FitError> {
+/// Checks the optimum without trusting the simplex: the coefficients are
+/// ≥ 0 and bound every solve (primal feasible), the dual solution `y` is ≥ 0
+/// with `Σᵢ (uᵢⱼ/mᵢ)·yᵢ ≤ fⱼ` (dual feasible), and the two objectives are
+/// equal, which by weak duality makes both optimal.
+fn certify(fit: &Fit, solves: &[Solve], y: &[f64]) -> Result<(), FitError> {
     if let Some(j) = fit.exact.iter().position(|&c| c < 0.0) {
         return Err(FitError::Certificate(format!(
             "coefficient {j} is {}",
             fit.exact[j]
         )));
     }
+    if let Some(i) = y.iter().position(|&v| v < 0.0) {
+        return Err(FitError::Certificate(format!("dual {i} is {}", y[i])));
+    }
+    for (j, &f) in fit.weight.iter().enumerate() {
+        let lhs: f64 = solves
+            .iter()
+            .zip(y)
+            .map(|(s, v)| f64::from(s.units[j]) / s.instructions * v)
+            .sum();
+        if lhs > f + CERTIFY * f.max(1e-12) {
+            return Err(FitError::Certificate(format!(
+                "dual constraint {j}: {lhs} > {f}"
+            )));
+        }
+    }
+    let dual: f64 = y.iter().sum();
     for s in solves {
         let r = counted(&fit.exact, &s.units) / s.instructions;
         if r < 1.0 - CERTIFY {
@@ -209,11 +230,7 @@ pub fn bound(cost: &mut [u64], solves: &[Solve], weight: &[f64]) -> Vec<Bump> {
             if let Some(term) = cheapest {
                 let by = (short / f64::from(s.units[term])).ceil() as u64;
                 cost[term] += by;
-                bumps.push(Bump {
-                    id: s.id,
-                    term,
-                    by,
-                });
+                bumps.push(Bump { id: s.id, term, by });
             }
         }
         if bumps.len() == before {

@@ -112,7 +112,7 @@ pub fn maximise(a: &[Vec<f64>], b: &[f64], c: &[f64]) -> Result<Optimum, LpError
     let duals = t.reduced.get(n..).unwrap_or_default();
     Ok(Optimum {
         x,
-        duals: duals.iter().map(|d| -d).collect(),
+        duals: duals.iter().map(|d| 0.0 - d).collect(),
         value: t.value,
         pivots,
     })
