@@ -10,6 +10,13 @@
 //! cost <problem> <ticks> <work> <iterations> <converged 0|1>
 //! ```
 //!
+//! Built with the `cost-terms` feature, each line ends with the units of
+//! each term of the cost model (`marionette_core::solve::cost::Term`, in
+//! order), and counting them costs instructions too. The model's
+//! coefficients are fitted to both runs (the instructions of this binary as
+//! built, the units of the `cost-terms` build) by `cargo run --release -p
+//! marionette-tests --example fit_cost` (`tests/examples/fit_cost.rs`).
+//!
 //! The problems: the CMU and TEMPUS skeletons and the table region's rig
 //! (the bench's `humanoid16`), 1 to 10 goals of every kind (points in the
 //! world and in a segment's frame, contact and one-sided planes,

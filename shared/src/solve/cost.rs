@@ -35,11 +35,13 @@
 //!
 //! The coefficients were fitted (a linear program: the smallest total
 //! relative excess with every solve bounded) to the instruction counts of
-//! the `cost` firmware binary's 714 solves on the emulated Cortex-M4F, with
-//! the units counted by the same binary built with the `cost-terms` feature
-//! of this crate. `tests/realtime.rs` runs that binary and checks that the
+//! the `cost` firmware binary's solves on the emulated Cortex-M4F, with the
+//! units counted by the same binary built with the `cost-terms` feature of
+//! this crate. `tests/realtime.rs` runs that binary and checks that the
 //! count bounds every solve; a change of the solver's code that breaks it
-//! needs a new fit (`firmware/src/bin/cost.rs` says how).
+//! needs a new fit: `cargo run --release -p marionette-tests --example
+//! fit_cost` measures, fits and prints the new [`COST`]
+//! (`tests/examples/fit_cost.rs`).
 
 /// The terms of the model: what each coefficient of [`COST`] is paid per.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
