@@ -109,8 +109,8 @@ pub enum Term {
     /// Per segment up to the path's last, per step that keeps the pose
     /// before its trials.
     Keep,
-    /// Per segment up to the path's last, per rejected step that puts the
-    /// kept pose back.
+    /// Per segment up to the path's last and per moving group, per
+    /// rejected step that puts the kept pose and the values back.
     Rewind,
 }
 
@@ -119,8 +119,8 @@ pub const TERMS: usize = 30;
 
 /// Instructions per unit of each term, in [`Term`] order.
 pub const COST: [u32; TERMS] = [
-    3945, 10, 360, 0, 0, 175, 112, 184, 30, 60, 203, 60, 11, 802, 71, 205, 54, 40, 93, 24, 100,
-    483, 183, 59, 33, 0, 0, 187, 30, 30,
+    2452, 0, 533, 0, 0, 144, 161, 119, 36, 0, 169, 0, 60, 165, 117, 0, 139, 52, 85, 16, 565, 523,
+    292, 35, 5, 6, 0, 405, 74, 31,
 ];
 
 /// The cost of `count` units of `term`. The sizes the solver counts are

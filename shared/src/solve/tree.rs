@@ -283,9 +283,7 @@ impl<const N: usize> Lm<N> {
             trial: refresh.with(Term::Apply, groups),
             keep: Tally::NONE.with(Term::Keep, span),
             reject: refresh.with(Term::Reject, groups),
-            rewind: eval_work(g, self.slots.simple)
-                .with(Term::Rewind, span)
-                .with(Term::Reject, groups),
+            rewind: eval_work(g, self.slots.simple).with(Term::Rewind, span + groups),
             round: Tally::NONE
                 .with(Term::Pair, live.pairs)
                 .with(Term::Block, g * g),
@@ -306,10 +304,14 @@ impl<const N: usize> Lm<N> {
     /// The most a next iteration can do within `left`: its rounds (2 when a
     /// one-sided plane may wake) and its factorisation passes per round (up
     /// to [`CLAMP_PASSES`]), with its trials, finding the coupling and a
-    /// rejection reserved; `None` if not even one pass fits. A rejection is
-    /// undone by placing the path again, or, where keeping the pose before
-    /// the trials buys more passes, by putting the kept pose back (the third
-    /// of the plan: keep).
+    /// rejection reserved; `None` if not even one pass fits.
+    ///
+    /// A rejection is undone by placing the path again, or, in a solve with
+    /// a budget, by putting back the pose kept before the trials (the third
+    /// of the plan: keep). Keeping costs every step a copy of the pose but
+    /// makes a rejection cheap, in what the plan reserves and in what it
+    /// spends: the live loop's frames reject often enough that this leaves
+    /// the goals more passes ( `tests/realtime.rs`'s budget sweep).
     fn plan(&self, solver: &Solver, fresh: bool, left: u32) -> Option<Plan> {
         let p = &self.prices;
         let trials = if solver.extrapolate { 3 } else { 1 };
@@ -317,15 +319,16 @@ impl<const N: usize> Lm<N> {
         if fresh {
             fixed = fixed.plus(&p.linearise);
         }
-        let placed = self.most(&fixed.plus(&p.reject), left);
-        if placed.is_some_and(|(_, passes)| passes == CLAMP_PASSES) {
-            return placed.map(|(r, passes)| (r, passes, false));
-        }
-        let kept = self.most(&fixed.plus(&p.keep).plus(&p.rewind), left);
-        match (placed, kept) {
-            (Some(a), Some(b)) if b > a => Some((b.0, b.1, true)),
-            (None, Some(b)) => Some((b.0, b.1, true)),
-            (a, _) => a.map(|(r, passes)| (r, passes, false)),
+        let kept = if solver.budget == u32::MAX {
+            None
+        } else {
+            self.most(&fixed.plus(&p.keep).plus(&p.rewind), left)
+        };
+        match kept {
+            Some((rounds, passes)) => Some((rounds, passes, true)),
+            None => self
+                .most(&fixed.plus(&p.reject), left)
+                .map(|(rounds, passes)| (rounds, passes, false)),
         }
     }
 
