@@ -3,7 +3,7 @@
 //!
 //! Run with `cargo run --release -p marionette-tests --example fit_cost`
 //! (needs `qemu-system-arm` and the `thumbv7em-none-eabihf` target, as the
-//! tests do); `-- --margin P` fits with `P` % to spare (default 5).
+//! tests do).
 //!
 //! It runs the `cost` firmware binary (`firmware/src/bin/cost.rs`) twice on
 //! QEMU under `-icount`, with the bench's table region: as built into
@@ -21,8 +21,7 @@
 //! ```
 //!
 //! Then it solves the linear program "the smallest total relative excess
-//! `Σᵢ (c·uᵢ)/mᵢ` with every solve bounded, `c·uᵢ ≥ (1 + margin)·mᵢ`,
-//! `c ≥ 0`" (module
+//! `Σᵢ (c·uᵢ)/mᵢ` with every solve bounded, `c·uᵢ ≥ mᵢ`, `c ≥ 0`" (module
 //! `fit`, by the simplex method of module `simplex`), rounds each
 //! coefficient up to an integer, checks that every solve is still bounded
 //! (raising a coefficient where one is not, and saying so), and prints the
@@ -49,11 +48,6 @@ use marionette_host::{icount, qemu};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
-
-/// The bound's margin by default, percent: the live loop's solves are
-/// other problems than the `cost` binary's (`tests/realtime.rs` checks the
-/// bound on them through the frames' reserve).
-const MARGIN: f64 = 5.0;
 
 /// The firmware's target triple (`firmware/.cargo/config.toml`).
 const TARGET: &str = "thumbv7em-none-eabihf";
@@ -117,9 +111,6 @@ enum Error {
         /// The line.
         text: String,
     },
-    /// The command line.
-    #[error("command line: {0}")]
-    Args(String),
     /// The two runs did not solve alike.
     #[error("the two runs disagree: {0}")]
     Runs(String),
@@ -169,23 +160,12 @@ fn run() -> Result<(), Error> {
     if let Some(median) = slower.get(slower.len() / 2) {
         println!("instructions with cost-terms / without, per solve: median {median:.2}");
     }
-    // Fitted to the instructions raised by the margin: the bound then holds
-    // with that much to spare, for problems and code a little unlike these.
-    let margin = margin()?;
-    let raised: Vec<Solve> = solves
-        .iter()
-        .map(|s| Solve {
-            instructions: s.instructions * (1.0 + margin / 100.0),
-            ..s.clone()
-        })
-        .collect();
-    println!("margin: every solve bounded with {margin} % to spare");
-    let fitted = fit::fit(&raised, TERMS)?;
+    let fitted = fit::fit(&solves, TERMS)?;
     let mut cost = fit::round_up(&fitted.exact);
     for &j in &fitted.unused {
         cost[j] = u64::from(COST[j]);
     }
-    let bumps = fit::bound(&mut cost, &raised, &fitted.weight);
+    let bumps = fit::bound(&mut cost, &solves, &fitted.weight);
     report(&solves, &fitted, &cost, &bumps)?;
     println!(
         "fitted in {:.1} s",
@@ -369,23 +349,6 @@ fn pair(plain: &Run, terms: &Run) -> Result<Vec<Solve>, Error> {
 }
 
 /// Prints the per-term table, the bumps, the array and the ratios.
-/// The margin in percent: `--margin P` (default [`MARGIN`]).
-fn margin() -> Result<f64, Error> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    match args.as_slice() {
-        [] => Ok(MARGIN),
-        [flag, value] if flag == "--margin" => value
-            .parse::<f64>()
-            .ok()
-            .filter(|m| (0.0..100.0).contains(m))
-            .ok_or_else(|| Error::Args(format!("--margin {value}: a percentage from 0 to 100"))),
-        _ => Err(Error::Args(format!(
-            "{}: the only option is --margin P",
-            args.join(" ")
-        ))),
-    }
-}
-
 fn report(solves: &[Solve], fitted: &fit::Fit, cost: &[u64], bumps: &[Bump]) -> Result<(), Error> {
     println!(
         "linear program: {} pivots, mean counted/measured {:.4}",

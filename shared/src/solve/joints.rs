@@ -120,8 +120,6 @@ pub(super) struct Dofs {
     pub delta: Vec3,
     /// The values before the step.
     back: Vec3,
-    /// The group's `turn` before the step.
-    back_turn: (f32, f32),
     pub lever: f32,
 }
 
@@ -160,7 +158,6 @@ const NO_DOFS: Dofs = Dofs {
     inv_d: Vec3::ZERO,
     delta: Vec3::ZERO,
     back: Vec3::ZERO,
-    back_turn: (0.0, 0.0),
     lever: 0.0,
 };
 const NO_LINK: Link = Link {
@@ -225,11 +222,6 @@ pub(super) struct Joints<const N: usize> {
     path: u64,
     /// The root position before the step.
     back_root: Vec3,
-    /// The world placement of the segments up to the path's last before
-    /// the step ([`Joints::keep_pose`]), to go back to without placing them
-    /// again.
-    back_positions: [Vec3; N],
-    back_rotations: [Quat; N],
     /// Bit `j`: slot `j` is not met; sets the live groups
     /// ([`Joints::settle`]).
     unmet: u16,
@@ -266,8 +258,6 @@ impl<const N: usize> Joints<N> {
         nodes: 0,
         path: 0,
         back_root: Vec3::ZERO,
-        back_positions: [Vec3::ZERO; N],
-        back_rotations: [Quat::IDENTITY; N],
         unmet: 0,
         reach: 0,
         root_moved: false,
@@ -390,7 +380,7 @@ impl<const N: usize> Joints<N> {
     /// Applies the step (each DOF's `delta`), scaled to at most `max_step`
     /// (rad or m), clamped into the limits. With `keep`, first keeps the
     /// values of the moving DOFs and the root position, to go back to with
-    /// [`Joints::back`] or [`Joints::rewind`].
+    /// [`Joints::back`].
     pub fn apply(&mut self, work: &mut Work<'_, '_, N>, max_step: f32, keep: bool) {
         let n = self.count;
         let dofs = self.dofs.get(..n).unwrap_or(&[]).iter();
@@ -418,7 +408,6 @@ impl<const N: usize> Joints<N> {
             if let Some(values) = work.angles.get_mut(usize::from(g.seg)) {
                 if keep {
                     d.back = Vec3::from_array(*values);
-                    d.back_turn = g.turn;
                 }
                 // By count, without an iterator (opt-level "s").
                 let (step, [x, y, z]) = (d.delta * scale, *values);
@@ -450,64 +439,6 @@ impl<const N: usize> Joints<N> {
             if let Some(x) = work.angles.get_mut(usize::from(g.seg)) {
                 *x = d.back.to_array();
             }
-        }
-    }
-
-    /// The segments up to the path's last: the range [`Joints::keep_pose`]
-    /// copies (whole, in fewer instructions than the path segment by
-    /// segment).
-    pub fn path_span(&self) -> usize {
-        (64 - self.path.leading_zeros() as usize).min(N)
-    }
-
-    /// Keeps the placement of the segments up to the path's last, to go
-    /// back to with [`Joints::rewind`] (the pose in the work must be that
-    /// of the angles: placed by [`Joints::forward`] since they changed).
-    pub fn keep_pose(&mut self, work: &Work<'_, '_, N>) {
-        let n = self.path_span();
-        if let (Some(kp), Some(p), Some(kr), Some(r)) = (
-            self.back_positions.get_mut(..n),
-            work.pose.positions.get(..n),
-            self.back_rotations.get_mut(..n),
-            work.pose.rotations.get(..n),
-        ) {
-            kp.copy_from_slice(p);
-            kr.copy_from_slice(r);
-        }
-    }
-
-    /// Goes back to the values [`Joints::apply`] kept and the placement
-    /// [`Joints::keep_pose`] kept before it: the pose forward kinematics
-    /// would place again, bit for bit (it is a function of the angles),
-    /// without placing it.
-    pub fn rewind(&mut self, work: &mut Work<'_, '_, N>) {
-        work.angles.root_position = self.back_root;
-        for (d, g) in self.dofs.iter().zip(&mut self.groups).take(self.count) {
-            g.moved = false;
-            let s = usize::from(g.seg);
-            if !g.live || g.translation() {
-                continue;
-            }
-            if let Some(x) = work.angles.get_mut(s) {
-                *x = d.back.to_array();
-            }
-            // The rotation kept is the step's (a later placement at these
-            // angles would not set `turn`): computed again when next needed.
-            g.turn = d.back_turn;
-            if let Some(kept) = self.local.get_mut(s) {
-                *kept = Local::NONE;
-            }
-        }
-        self.root_moved = false;
-        let n = self.path_span();
-        if let (Some(kp), Some(p), Some(kr), Some(r)) = (
-            self.back_positions.get(..n),
-            work.pose.positions.get_mut(..n),
-            self.back_rotations.get(..n),
-            work.pose.rotations.get_mut(..n),
-        ) {
-            p.copy_from_slice(kp);
-            r.copy_from_slice(kr);
         }
     }
 
@@ -1135,102 +1066,5 @@ mod tests {
             }
         }
         assert!(checked > 20, "{checked}");
-    }
-
-    /// A rejected step goes back without placing the path again: after one
-    /// or two trial placements, [`Joints::rewind`] leaves the angles, the
-    /// pose and each group's geometry as they were, bit for bit; the same
-    /// step again places and turns as it did, and another step's placement
-    /// is the whole-body forward kinematics (`Angles::forward`, the slow
-    /// obvious one) of its angles.
-    #[test]
-    fn rewind_puts_back_what_the_step_placed() {
-        let body = cmu::BODY;
-        let bits = |p: &Pose<32>| {
-            let ps = p
-                .positions
-                .iter()
-                .flat_map(|v| v.to_array().map(f32::to_bits));
-            let qs = p
-                .rotations
-                .iter()
-                .flat_map(|q| q.to_array().map(f32::to_bits));
-            let mut out = [0u32; 32 * 7];
-            for (o, b) in out.iter_mut().zip(ps.chain(qs)) {
-                *o = b;
-            }
-            out
-        };
-        for (root, trials) in [(RootMode::Fixed, 1), (RootMode::Float, 2)] {
-            let mut a = Angles::<32>::rest(&body).unwrap();
-            for (i, v) in a.values.iter_mut().flat_map(|v| v.iter_mut()).enumerate() {
-                *v = 0.3 * ((i as f32) * 0.7).sin();
-            }
-            a.clamp_to_limits(&body);
-            let goals = [
-                Goal::reach(cmu::index::LEFT_HAND, Vec3::new(0.3, 1.0, 0.2), 1.0),
-                Goal::reach(cmu::index::RIGHT_FOOT, Vec3::new(-0.1, 0.0, 0.1), 4.0),
-            ];
-            let (mut pose, mut angles) = (Pose::<32>::default(), a);
-            let mut work = Work::new(&body, &goals, &mut angles, &mut pose);
-            work.check().unwrap();
-            let mut slots = Slots::EMPTY;
-            slots.init(&goals, 4.0).unwrap();
-            let mut joints = Joints::<32>::EMPTY;
-            joints.init(&Solver::DEFAULT.with_root(root), &work, &slots);
-            joints.forward(&mut work);
-            slots.evaluate(&work).unwrap();
-            joints.settle(&slots, 0.0);
-            let before = (
-                bits(work.pose),
-                work.angles.values,
-                work.angles.root_position,
-            );
-            let geometry_of = |work: &Work<'_, '_, 32>, joints: &Joints<32>| {
-                let mut out = [(Vec3::ZERO, [Vec3::ZERO; 3]); 32];
-                for (o, g) in out.iter_mut().zip(joints.groups()) {
-                    *o = geometry(work, g);
-                }
-                out
-            };
-            let axes = geometry_of(&work, &joints);
-            let step = |joints: &mut Joints<32>, k: f32| {
-                for (i, d) in joints.dofs.iter_mut().enumerate() {
-                    d.delta = Vec3::splat(0.05 * k * ((i as f32) * 1.3).cos());
-                }
-            };
-            step(&mut joints, 1.0);
-            joints.keep_pose(&work);
-            joints.apply(&mut work, 1.0, true);
-            joints.forward(&mut work);
-            let tried = (bits(work.pose), geometry_of(&work, &joints));
-            if trials == 2 {
-                joints.apply(&mut work, 1.0, false);
-                joints.forward(&mut work);
-            }
-            assert_ne!(bits(work.pose), before.0);
-            joints.rewind(&mut work);
-            assert_eq!(bits(work.pose), before.0, "{root:?}");
-            assert_eq!(work.angles.values, before.1);
-            assert_eq!(work.angles.root_position, before.2);
-            assert_eq!(geometry_of(&work, &joints), axes);
-            // The same step again: the same pose and geometry as the first
-            // time.
-            joints.keep_pose(&work);
-            joints.apply(&mut work, 1.0, true);
-            joints.forward(&mut work);
-            assert_eq!((bits(work.pose), geometry_of(&work, &joints)), tried);
-            joints.rewind(&mut work);
-            // The next step places what the whole-body forward kinematics does.
-            step(&mut joints, -1.0);
-            joints.apply(&mut work, 1.0, true);
-            joints.forward(&mut work);
-            let (mut l, mut p) = (LocalPose::<32>::default(), Pose::<32>::default());
-            work.angles.forward(&body, &mut l, &mut p).unwrap();
-            for s in (0..body.len()).filter(|&s| joints.path >> s & 1 != 0) {
-                assert_eq!(work.pose.positions[s], p.positions[s], "{root:?} {s}");
-                assert_eq!(work.pose.rotations[s], p.rotations[s], "{root:?} {s}");
-            }
-        }
     }
 }

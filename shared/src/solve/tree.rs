@@ -79,12 +79,8 @@ struct Prices {
     linearise: Tally,
     /// A trial step: applying it, forward kinematics and the goals.
     trial: Tally,
-    /// Keeping the pose before the trials.
-    keep: Tally,
-    /// Going back from a rejected trial by placing the path again.
+    /// Going back from a rejected trial.
     reject: Tally,
-    /// Going back from a rejected trial to the kept pose.
-    rewind: Tally,
     /// A round of a step (assembling the system).
     round: Tally,
     /// A factorisation pass (with the clamping at the limits).
@@ -95,20 +91,13 @@ struct Prices {
     planes: bool,
 }
 
-/// What an iteration may do: its rounds, its passes per round, and whether
-/// it keeps the pose before its trials (to undo a rejection by putting it
-/// back rather than placing the path again).
-type Plan = (usize, usize, bool);
-
 impl Prices {
     /// Nothing priced yet.
     const NONE: Prices = Prices {
         base: Tally::NONE,
         linearise: Tally::NONE,
         trial: Tally::NONE,
-        keep: Tally::NONE,
         reject: Tally::NONE,
-        rewind: Tally::NONE,
         round: Tally::NONE,
         pass: Tally::NONE,
         couple: Tally::NONE,
@@ -270,7 +259,6 @@ impl<const N: usize> Lm<N> {
         let live = self.joints.live;
         let (groups, g) = (self.joints.count, self.slots.count);
         let refresh = self.refresh_work(live.dofs);
-        let span = self.joints.path_span();
         let (blocks, products) = self.system.most;
         self.prices = Prices {
             base: Tally::NONE
@@ -281,9 +269,7 @@ impl<const N: usize> Lm<N> {
                 .with(Term::LiveDof, live.dofs)
                 .with(Term::LinkDof, live.link_dofs),
             trial: refresh.with(Term::Apply, groups),
-            keep: Tally::NONE.with(Term::Keep, span),
             reject: refresh.with(Term::Reject, groups),
-            rewind: eval_work(g, self.slots.simple).with(Term::Rewind, span + groups),
             round: Tally::NONE
                 .with(Term::Pair, live.pairs)
                 .with(Term::Block, g * g),
@@ -305,36 +291,14 @@ impl<const N: usize> Lm<N> {
     /// one-sided plane may wake) and its factorisation passes per round (up
     /// to [`CLAMP_PASSES`]), with its trials, finding the coupling and a
     /// rejection reserved; `None` if not even one pass fits.
-    ///
-    /// A rejection is undone by placing the path again, or, in a solve with
-    /// a budget, by putting back the pose kept before the trials (the third
-    /// of the plan: keep). Keeping costs every step a copy of the pose but
-    /// makes a rejection cheap, in what the plan reserves and in what it
-    /// spends: the live loop's frames reject often enough that this leaves
-    /// the goals more passes ( `tests/realtime.rs`'s budget sweep).
-    fn plan(&self, solver: &Solver, fresh: bool, left: u32) -> Option<Plan> {
+    fn plan(&self, solver: &Solver, fresh: bool, left: u32) -> Option<(usize, usize)> {
         let p = &self.prices;
         let trials = if solver.extrapolate { 3 } else { 1 };
-        let mut fixed = p.base.plus(&p.couple).plus(&p.trial.times(trials));
+        let mut fixed = p.base.plus(&p.couple).plus(&p.reject);
+        fixed = fixed.plus(&p.trial.times(trials));
         if fresh {
             fixed = fixed.plus(&p.linearise);
         }
-        let kept = if solver.budget == u32::MAX {
-            None
-        } else {
-            self.most(&fixed.plus(&p.keep).plus(&p.rewind), left)
-        };
-        match kept {
-            Some((rounds, passes)) => Some((rounds, passes, true)),
-            None => self
-                .most(&fixed.plus(&p.reject), left)
-                .map(|(rounds, passes)| (rounds, passes, false)),
-        }
-    }
-
-    /// The most rounds and passes per round that fit `left` after `fixed`.
-    fn most(&self, fixed: &Tally, left: u32) -> Option<(usize, usize)> {
-        let p = &self.prices;
         let pass = p.pass.cost().max(1);
         let most = if p.planes { 2 } else { 1 };
         (1..=most).rev().find_map(|rounds| {
@@ -348,13 +312,12 @@ impl<const N: usize> Lm<N> {
 
     /// The work of an iteration: a linearisation if `fresh`, a step of
     /// `(rounds, passes, coupling found again)`, `trials` forward
-    /// kinematics (the pose kept before them if `kept`), and going back if
-    /// `rejected`.
+    /// kinematics, and going back if `rejected`.
     fn iteration_work(
         &self,
         fresh: bool,
         (rounds, passes, couple): (usize, usize, bool),
-        (trials, kept): (usize, bool),
+        trials: usize,
         rejected: bool,
     ) -> Tally {
         let p = &self.prices;
@@ -369,14 +332,10 @@ impl<const N: usize> Lm<N> {
         if couple {
             t = t.plus(&p.couple);
         }
-        if trials > 0 && kept {
-            t = t.plus(&p.keep);
+        if rejected {
+            t = t.plus(&p.reject);
         }
-        match (rejected, kept) {
-            (true, true) => t.plus(&p.rewind),
-            (true, false) => t.plus(&p.reject),
-            (false, _) => t,
-        }
+        t
     }
 
     /// Levenberg–Marquardt from the current angles; returns (iterations,
@@ -403,7 +362,7 @@ impl<const N: usize> Lm<N> {
                 self.joints.settle(&self.slots, tol2);
                 self.price();
             }
-            let Some((rounds, passes, kept)) = self.plan(solver, fresh, meter.left()) else {
+            let Some(plan) = self.plan(solver, fresh, meter.left()) else {
                 // Out of work: what is left is for the next solve.
                 return Ok((iterations, false));
             };
@@ -419,22 +378,17 @@ impl<const N: usize> Lm<N> {
                 &self.slots,
                 &mut self.rhs,
                 lambda * lambda,
-                (rounds, passes),
+                plan,
             );
             if !stepped {
-                let work = self.iteration_work(linearised, self.system.work, (0, kept), false);
-                meter.add_tally(&work);
+                meter.add_tally(&self.iteration_work(linearised, self.system.work, 0, false));
                 lambda *= 4.0;
                 continue;
             }
             let error = self.slots.error;
-            if kept {
-                self.joints.keep_pose(work);
-            }
             let trials = self.trial(solver, work)?;
             let accepted = self.slots.error < error;
-            let done = (trials, kept);
-            meter.add_tally(&self.iteration_work(linearised, self.system.work, done, !accepted));
+            meter.add_tally(&self.iteration_work(linearised, self.system.work, trials, !accepted));
             if accepted {
                 let moved = self.slots.accept();
                 fresh = true;
@@ -444,15 +398,8 @@ impl<const N: usize> Lm<N> {
                     return Ok((iterations, true));
                 }
             } else {
-                if kept {
-                    // The pose put back, the goals evaluated again (fewer
-                    // instructions than keeping them for every trial).
-                    self.joints.rewind(work);
-                    self.slots.evaluate(work)?;
-                } else {
-                    self.joints.back(work);
-                    self.refresh(work)?;
-                }
+                self.joints.back(work);
+                self.refresh(work)?;
                 self.slots.keep();
                 lambda *= 4.0;
                 if lambda > MAX_DAMPING {
