@@ -41,7 +41,8 @@
 //! count bounds every solve; a change of the solver's code that breaks it
 //! needs a new fit: `cargo run --release -p marionette-tests --example
 //! fit_cost` measures, fits and prints the new [`COST`]
-//! (`tests/examples/fit_cost.rs`).
+//! (`tests/examples/fit_cost.rs`); with `-- --write` it writes it here and
+//! refits until it bounds the solves it leads to.
 
 /// The terms of the model: what each coefficient of [`COST`] is paid per.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
