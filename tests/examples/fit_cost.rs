@@ -148,8 +148,19 @@ enum Error {
     /// The `COST` item was not found.
     #[error("{0}: no `pub const COST: [u32; TERMS] = [ … ];` to replace")]
     Source(PathBuf),
-    /// A file could not be read or written.
-    #[error("{0}")]
+    /// The integer coefficients leave a solve unbounded.
+    #[error("the rounded coefficients do not bound solve {0}, and no raise of a term fixes it")]
+    Unbounded(u32),
+    /// `cost.rs` could not be read or written.
+    #[error("{path}: {why}")]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        why: String,
+    },
+    /// The table region's temporary file failed.
+    #[error("the table region's temporary file: {0}")]
     Io(#[from] std::io::Error),
 }
 
@@ -180,13 +191,10 @@ fn run() -> Result<(), Error> {
         all.extend(solves);
         let cost = refit(&all, &current)?;
         if !write {
-            if least < 1.0 {
-                println!(
-                    "the current COST does not bound every solve (least ratio {least:.3}); a \
-                     fitted COST changes which steps a budget affords: `-- --write` refits \
-                     until the written COST bounds its own run"
-                );
-            }
+            println!(
+                "a new COST changes which steps a budget affords, so it may not bound the \
+                 solves it leads to: `-- --write` writes it and refits until it does"
+            );
             return Ok(());
         }
         let path = repo.join("shared/src/solve/cost.rs");
@@ -235,6 +243,12 @@ fn refit(solves: &[Solve], current: &[u64]) -> Result<Vec<u64>, Error> {
         cost[j] = current[j];
     }
     let bumps = fit::bound(&mut cost, solves, &fitted.weight);
+    let short = solves
+        .iter()
+        .find(|s| (fit::counted_int(&cost, &s.units) as f64) < s.instructions);
+    if let Some(s) = short {
+        return Err(Error::Unbounded(s.id));
+    }
     report(solves, &fitted, current, &cost, &bumps)?;
     println!("fitted in {:.1} s", start.elapsed().as_secs_f64());
     Ok(cost)
@@ -242,7 +256,11 @@ fn refit(solves: &[Solve], current: &[u64]) -> Result<Vec<u64>, Error> {
 
 /// Replaces the `COST` array in `path` (`shared/src/solve/cost.rs`).
 fn write_cost(path: &Path, cost: &[u64]) -> Result<(), Error> {
-    let text = std::fs::read_to_string(path)?;
+    let file = |e: std::io::Error| Error::File {
+        path: path.to_path_buf(),
+        why: e.to_string(),
+    };
+    let text = std::fs::read_to_string(path).map_err(file)?;
     let head = "pub const COST: [u32; TERMS] = [";
     let missing = || Error::Source(path.to_path_buf());
     let start = text.find(head).ok_or_else(missing)?;
@@ -253,7 +271,7 @@ fn write_cost(path: &Path, cost: &[u64]) -> Result<(), Error> {
         array(&to_u32(cost)?),
         &text[end..]
     );
-    std::fs::write(path, new)?;
+    std::fs::write(path, new).map_err(file)?;
     Ok(())
 }
 
@@ -308,6 +326,7 @@ fn run_elf(elf: &Path) -> Result<String, Error> {
 }
 
 /// One `cost` line.
+#[derive(Debug)]
 struct Line {
     /// 1-based line of the console.
     line: usize,
@@ -318,6 +337,7 @@ struct Line {
 }
 
 /// The `cost` lines of one run, and how many solves failed.
+#[derive(Debug)]
 struct Run {
     /// The run's name, for errors.
     name: &'static str,
@@ -511,6 +531,53 @@ fn array(cost: &[u32]) -> String {
 
 #[cfg(test)]
 mod tests {
+    use super::{COST, Error, TERMS, pair, parse};
+
+    #[test]
+    fn a_console_is_read_line_by_line() {
+        let run = parse("boot\ncost 1 320 100 2 1 3 4\nfailed 2\n", "t").unwrap();
+        assert_eq!(run.failed, 1);
+        assert_eq!(run.lines.len(), 1);
+        assert_eq!(run.lines[0].line, 2);
+        assert_eq!(run.lines[0].head, [1, 320, 100, 2, 1]);
+        assert_eq!(run.lines[0].units, [3, 4]);
+    }
+
+    #[test]
+    fn a_bad_line_names_its_line_and_field() {
+        let err = parse("cost 1 320 100 2 1\ncost 3 x 1 1 1\n", "t").unwrap_err();
+        assert!(
+            matches!(&err, Error::Parse { line: 2, field, .. } if field == "ticks"),
+            "{err}"
+        );
+        let err = parse("cost 1 320\n", "t").unwrap_err();
+        assert!(
+            matches!(&err, Error::Parse { line: 1, field, .. } if field == "work"),
+            "{err}"
+        );
+    }
+
+    /// One unit of term 0: the work must be `COST[0]`, else the runs were
+    /// not built from the same model.
+    #[test]
+    fn the_runs_must_count_alike() {
+        let mut units = vec!["0"; TERMS];
+        units[0] = "1";
+        let terms = format!("cost 0 9 9 1 1 {}\n", units.join(" "));
+        let terms = parse(&terms, "terms").unwrap();
+        let current: Vec<u64> = COST.iter().map(|&c| u64::from(c)).collect();
+        let ok = parse(&format!("cost 0 32 {} 1 1\n", COST[0]), "plain").unwrap();
+        let solves = pair(&ok, &terms, &current).unwrap();
+        assert_eq!(solves[0].instructions, 10.0);
+        let off = parse(&format!("cost 0 32 {} 1 1\n", COST[0] + 1), "plain").unwrap();
+        assert!(matches!(pair(&off, &terms, &current), Err(Error::Runs(_))));
+        let other = parse(&format!("cost 0 32 {} 2 1\n", COST[0]), "plain").unwrap();
+        assert!(matches!(
+            pair(&other, &terms, &current),
+            Err(Error::Runs(_))
+        ));
+    }
+
     /// The array as rustfmt laid it out in `shared/src/solve/cost.rs`: a
     /// line that would reach 100 columns is wrapped.
     #[test]
