@@ -5,16 +5,17 @@
 //! (needs `qemu-system-arm` and the `thumbv7em-none-eabihf` target, as the
 //! tests do).
 //!
-//! It runs the `cost` firmware binary (`firmware/src/bin/cost.rs`) twice on
-//! QEMU under `-icount`, with the bench's table region: as built into
-//! `marionette-host` (the instructions of each solve: its ticks over
-//! `icount::TICKS_PER_INSTRUCTION`), and built with the `cost-terms` feature
-//! in its own folder `target/cost-terms` (a nested `cargo build --release
-//! --bin cost` in `firmware/`), which also prints the units of each term.
-//! Counting the units costs instructions, hence the two runs; they solve the
-//! same problems alike, which is checked (ids, iterations, convergence, and
-//! each solve's `work` equal to the current `COST` times its units). A line
-//! per solve:
+//! It builds the `cost` firmware binary (`firmware/src/bin/cost.rs`) twice
+//! with nested `cargo build --release --bin cost` in `firmware/`: as it
+//! ships, in `firmware/target` (where `host/build.rs` builds it too), and
+//! with the `cost-terms` feature, which also prints the units of each term,
+//! in its own folder `target/cost-terms`. It runs both on QEMU under
+//! `-icount` with the bench's table region. The instructions of each solve
+//! come from the first (its ticks over `icount::TICKS_PER_INSTRUCTION`),
+//! since counting the units costs instructions too; the units from the
+//! second. The two must solve alike, which is checked (ids, failures,
+//! iterations, convergence, and each solve's `work` equal to the current
+//! `COST` times its units). A line per solve:
 //!
 //! ```text
 //! cost <id> <ticks> <work> <iterations> <converged> [<units of each term...>]
@@ -26,9 +27,16 @@
 //! coefficient up to an integer, checks that every solve is still bounded
 //! (raising a coefficient where one is not, and saying so), and prints the
 //! new `COST` array as Rust source beside the ratios counted/measured
-//! (least, median, greatest) of the current and the new coefficients. A
-//! term no solve has a unit of keeps its current coefficient. Nothing is
-//! written: paste the array into `shared/src/solve/cost.rs`.
+//! (least, median, greatest, mean) of the current and the new coefficients.
+//! A term no solve has a unit of keeps its current coefficient.
+//!
+//! New coefficients change what a budget affords (the solver plans its
+//! steps by them), so the solves under the new `COST` are not quite those
+//! it was fitted to, and it may not bound all of them. With `-- --write` it
+//! writes the array into `shared/src/solve/cost.rs`, builds and measures
+//! again, and while the written `COST` does not bound every solve of its
+//! own run, refits to all the solves measured so far and writes again (at
+//! most [`ROUNDS`] rounds). Without it nothing is written.
 //!
 //! The number of terms is `marionette_core::solve::cost::TERMS`; the
 //! firmware prints as many units per solve, from the same source tree.
@@ -67,6 +75,9 @@ const OUTER_ENV: [&str; 11] = [
     "CLIPPY_ARGS",
     "RUSTDOC",
 ];
+
+/// The most rounds of `--write`.
+const ROUNDS: usize = 6;
 
 /// Leading fields of a `cost` line before the units: id, ticks, work,
 /// iterations, converged.
@@ -125,8 +136,31 @@ enum Error {
     /// The fit failed.
     #[error(transparent)]
     Fit(#[from] fit::FitError),
-    /// A file could not be written.
-    #[error("{0}")]
+    /// Unknown arguments.
+    #[error("unknown arguments {0:?}: the only option is --write")]
+    Usage(String),
+    /// The firmware printed no solves.
+    #[error("the cost firmware printed no solves")]
+    NoSolves,
+    /// `--write` found no COST that bounds its own run.
+    #[error("after {0} rounds the written COST still does not bound every solve of its run")]
+    Rounds(usize),
+    /// The `COST` item was not found.
+    #[error("{0}: no `pub const COST: [u32; TERMS] = [ … ];` to replace")]
+    Source(PathBuf),
+    /// The integer coefficients leave a solve unbounded.
+    #[error("the rounded coefficients do not bound solve {0}, and no raise of a term fixes it")]
+    Unbounded(u32),
+    /// `cost.rs` could not be read or written.
+    #[error("{path}: {why}")]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        why: String,
+    },
+    /// The table region's temporary file failed.
+    #[error("the table region's temporary file: {0}")]
     Io(#[from] std::io::Error),
 }
 
@@ -138,20 +172,55 @@ fn main() {
 }
 
 fn run() -> Result<(), Error> {
-    let start = Instant::now();
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let write = match args.as_slice() {
+        [] => false,
+        [w] if w == "--write" => true,
+        _ => return Err(Error::Usage(args.join(" "))),
+    };
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let terms_elf = build(&repo)?;
+    let mut current: Vec<u64> = COST.iter().map(|&c| u64::from(c)).collect();
+    let mut all = vec![];
+    for round in 1..=ROUNDS {
+        let solves = measure(&repo, &current)?;
+        let [least, ..] = fit::ratios(&current, &solves).ok_or(Error::NoSolves)?;
+        if round > 1 && least >= 1.0 {
+            println!("round {round}: the written COST bounds every solve of its own run");
+            return Ok(());
+        }
+        all.extend(solves);
+        let cost = refit(&all, &current)?;
+        if !write {
+            println!(
+                "a new COST changes which steps a budget affords, so it may not bound the \
+                 solves it leads to: `-- --write` writes it and refits until it does"
+            );
+            return Ok(());
+        }
+        let path = repo.join("shared/src/solve/cost.rs");
+        write_cost(&path, &cost)?;
+        println!("round {round}: wrote the new COST into {}", path.display());
+        current = cost;
+    }
+    Err(Error::Rounds(ROUNDS))
+}
+
+/// Builds and runs both binaries and pairs their solves (the firmware's
+/// counts checked against `current`).
+fn measure(repo: &Path, current: &[u64]) -> Result<Vec<Solve>, Error> {
+    let start = Instant::now();
+    let plain_elf = build(repo, &repo.join("firmware/target"), false)?;
+    let terms_elf = build(repo, &repo.join("target/cost-terms"), true)?;
     let built = start.elapsed();
-    let plain = parse(&measure(&qemu::firmware_elf("cost")?)?, "cost")?;
-    let terms = parse(&measure(&terms_elf)?, "cost with cost-terms")?;
-    let measured = start.elapsed();
-    let solves = pair(&plain, &terms)?;
+    let plain = parse(&run_elf(&plain_elf)?, "cost")?;
+    let terms = parse(&run_elf(&terms_elf)?, "cost with cost-terms")?;
+    let solves = pair(&plain, &terms, current)?;
     println!(
         "{} solves ({} failed), {TERMS} terms; firmware built in {:.0} s, both runs in {:.0} s",
         solves.len(),
         plain.failed,
         built.as_secs_f64(),
-        (measured - built).as_secs_f64()
+        (start.elapsed() - built).as_secs_f64()
     );
     let mut slower: Vec<f64> = (plain.lines.iter().zip(&terms.lines))
         .map(|(p, t)| f64::from(t.head[1]) / f64::from(p.head[1]))
@@ -160,38 +229,65 @@ fn run() -> Result<(), Error> {
     if let Some(median) = slower.get(slower.len() / 2) {
         println!("instructions with cost-terms / without, per solve: median {median:.2}");
     }
-    let fitted = fit::fit(&solves, TERMS)?;
+    print_ratios("current", current, &solves);
+    Ok(solves)
+}
+
+/// Fits `solves`, rounds up, bounds every solve again and reports; terms
+/// no solve uses keep their `current` coefficient.
+fn refit(solves: &[Solve], current: &[u64]) -> Result<Vec<u64>, Error> {
+    let start = Instant::now();
+    let fitted = fit::fit(solves, TERMS)?;
     let mut cost = fit::round_up(&fitted.exact);
     for &j in &fitted.unused {
-        cost[j] = u64::from(COST[j]);
+        cost[j] = current[j];
     }
-    let bumps = fit::bound(&mut cost, &solves, &fitted.weight);
-    report(&solves, &fitted, &cost, &bumps)?;
-    println!(
-        "fitted in {:.1} s",
-        (start.elapsed() - measured).as_secs_f64()
+    let bumps = fit::bound(&mut cost, solves, &fitted.weight);
+    let short = solves
+        .iter()
+        .find(|s| (fit::counted_int(&cost, &s.units) as f64) < s.instructions);
+    if let Some(s) = short {
+        return Err(Error::Unbounded(s.id));
+    }
+    report(solves, &fitted, current, &cost, &bumps)?;
+    println!("fitted in {:.1} s", start.elapsed().as_secs_f64());
+    Ok(cost)
+}
+
+/// Replaces the `COST` array in `path` (`shared/src/solve/cost.rs`).
+fn write_cost(path: &Path, cost: &[u64]) -> Result<(), Error> {
+    let file = |e: std::io::Error| Error::File {
+        path: path.to_path_buf(),
+        why: e.to_string(),
+    };
+    let text = std::fs::read_to_string(path).map_err(file)?;
+    let head = "pub const COST: [u32; TERMS] = [";
+    let missing = || Error::Source(path.to_path_buf());
+    let start = text.find(head).ok_or_else(missing)?;
+    let end = start + text[start..].find("];").ok_or_else(missing)? + 2;
+    let new = format!(
+        "{}{}{}",
+        &text[..start],
+        array(&to_u32(cost)?),
+        &text[end..]
     );
+    std::fs::write(path, new).map_err(file)?;
     Ok(())
 }
 
-/// Builds the `cost` binary with `cost-terms` into `target/cost-terms` and
-/// returns its ELF.
-fn build(repo: &Path) -> Result<PathBuf, Error> {
+/// Builds the `cost` binary (with `cost-terms` if `terms`) into
+/// `target_dir` and returns its ELF.
+fn build(repo: &Path, target_dir: &Path, terms: bool) -> Result<PathBuf, Error> {
     let dir = repo.join("firmware");
-    let target_dir = repo.join("target").join("cost-terms");
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let mut cmd = Command::new(cargo);
     cmd.current_dir(&dir)
-        .args([
-            "build",
-            "--release",
-            "--bin",
-            "cost",
-            "--features",
-            "cost-terms",
-        ])
+        .args(["build", "--quiet", "--release", "--bin", "cost"])
         .arg("--target-dir")
-        .arg(&target_dir);
+        .arg(target_dir);
+    if terms {
+        cmd.args(["--features", "cost-terms"]);
+    }
     for var in OUTER_ENV {
         cmd.env_remove(var);
     }
@@ -207,7 +303,7 @@ fn build(repo: &Path) -> Result<PathBuf, Error> {
 }
 
 /// Runs `elf` on QEMU under `-icount` with the bench's region; its console.
-fn measure(elf: &Path) -> Result<String, Error> {
+fn run_elf(elf: &Path) -> Result<String, Error> {
     let mut region = tempfile::NamedTempFile::new()?;
     std::io::Write::write_all(&mut region, &icount::bench_region()?)?;
     let config = qemu::Config {
@@ -230,6 +326,7 @@ fn measure(elf: &Path) -> Result<String, Error> {
 }
 
 /// One `cost` line.
+#[derive(Debug)]
 struct Line {
     /// 1-based line of the console.
     line: usize,
@@ -240,6 +337,7 @@ struct Line {
 }
 
 /// The `cost` lines of one run, and how many solves failed.
+#[derive(Debug)]
 struct Run {
     /// The run's name, for errors.
     name: &'static str,
@@ -294,8 +392,7 @@ fn parse(console: &str, name: &'static str) -> Result<Run, Error> {
 /// instructions too), units from the `cost-terms` run. The two must have
 /// solved alike: the same ids, iterations and convergence, and the plain
 /// run's work must be the current `COST` times the units.
-fn pair(plain: &Run, terms: &Run) -> Result<Vec<Solve>, Error> {
-    let current: Vec<u64> = COST.iter().map(|&c| u64::from(c)).collect();
+fn pair(plain: &Run, terms: &Run, current: &[u64]) -> Result<Vec<Solve>, Error> {
     if (plain.lines.len(), plain.failed) != (terms.lines.len(), terms.failed) {
         return Err(Error::Runs(format!(
             "{} solves ({} failed) in the {} run, {} ({} failed) in the {} run",
@@ -331,7 +428,7 @@ fn pair(plain: &Run, terms: &Run) -> Result<Vec<Solve>, Error> {
                 [t.head[0], t.head[3], t.head[4]]
             )));
         }
-        let model = fit::counted_int(&current, &t.units);
+        let model = fit::counted_int(current, &t.units);
         if model != u64::from(work) {
             return Err(Error::Runs(format!(
                 "solve {id}: the {} run counted {work}, but COST times the {} run's units is \
@@ -348,21 +445,29 @@ fn pair(plain: &Run, terms: &Run) -> Result<Vec<Solve>, Error> {
     Ok(solves)
 }
 
-/// Prints the per-term table, the bumps, the array and the ratios.
-fn report(solves: &[Solve], fitted: &fit::Fit, cost: &[u64], bumps: &[Bump]) -> Result<(), Error> {
+/// Prints the per-term table, the raises, the new array and its ratios.
+fn report(
+    solves: &[Solve],
+    fitted: &fit::Fit,
+    current: &[u64],
+    cost: &[u64],
+    bumps: &[Bump],
+) -> Result<(), Error> {
     println!(
-        "linear program: {} pivots, mean counted/measured {:.4}",
-        fitted.pivots, fitted.mean_ratio
+        "linear program over {} solves: {} pivots, mean counted/measured {:.4}",
+        solves.len(),
+        fitted.pivots,
+        fitted.mean_ratio
     );
     println!("term  solves using it  current  fitted (exact)  new");
-    for (j, (&c, exact)) in cost.iter().zip(&fitted.exact).enumerate() {
+    for (j, ((&c, exact), old)) in cost.iter().zip(&fitted.exact).zip(current).enumerate() {
         let using = solves.iter().filter(|s| s.units[j] > 0).count();
-        println!("{j:>4}  {using:>14}  {:>7}  {exact:>14.3}  {c:>4}", COST[j]);
+        println!("{j:>4}  {using:>14}  {old:>7}  {exact:>14.3}  {c:>4}");
     }
     for &j in &fitted.unused {
         println!(
-            "term {j}: no solve has a unit of it; kept at its current {}",
-            COST[j]
+            "term {j}: no solve has a unit of it; kept at {}",
+            current[j]
         );
     }
     for b in bumps {
@@ -371,34 +476,44 @@ fn report(solves: &[Solve], fitted: &fit::Fit, cost: &[u64], bumps: &[Bump]) -> 
             b.id, b.term, b.by
         );
     }
-    let mut new = Vec::with_capacity(cost.len());
-    for (term, &value) in cost.iter().enumerate() {
-        new.push(u32::try_from(value).map_err(|_| Error::Overflow { term, value })?);
-    }
-    println!("\n{}", source(&new));
-    let current: Vec<u64> = COST.iter().map(|&c| u64::from(c)).collect();
-    for (name, c) in [("current", current.as_slice()), ("new", cost)] {
-        if let Some([min, median, max]) = fit::ratios(c, solves) {
-            let mean = solves
-                .iter()
-                .map(|s| fit::counted_int(c, &s.units) as f64 / s.instructions)
-                .sum::<f64>()
-                / solves.len() as f64;
-            println!(
-                "{name:>7} COST: counted/measured over {} solves: min {min:.3}, median \
-                 {median:.3}, max {max:.3}, mean {mean:.4}",
-                solves.len()
-            );
-        }
-    }
+    println!(
+        "\n/// Instructions per unit of each term, in [`Term`] order.\n{}",
+        array(&to_u32(cost)?)
+    );
+    print_ratios("new", cost, solves);
     Ok(())
+}
+
+/// Prints the least, median, greatest and mean ratio counted/measured of
+/// `cost` over `solves`.
+fn print_ratios(name: &str, cost: &[u64], solves: &[Solve]) {
+    if let Some([min, median, max]) = fit::ratios(cost, solves) {
+        let mean = solves
+            .iter()
+            .map(|s| fit::counted_int(cost, &s.units) as f64 / s.instructions)
+            .sum::<f64>()
+            / solves.len() as f64;
+        println!(
+            "{name:>7} COST: counted/measured over {} solves: min {min:.3}, median {median:.3}, \
+             max {max:.3}, mean {mean:.4}",
+            solves.len()
+        );
+    }
+}
+
+/// The coefficients as `u32`s, as `COST` holds them.
+fn to_u32(cost: &[u64]) -> Result<Vec<u32>, Error> {
+    let mut out = Vec::with_capacity(cost.len());
+    for (term, &value) in cost.iter().enumerate() {
+        out.push(u32::try_from(value).map_err(|_| Error::Overflow { term, value })?);
+    }
+    Ok(out)
 }
 
 /// The `COST` item as rustfmt lays it out (values packed into lines of
 /// fewer than 100 columns).
-fn source(cost: &[u32]) -> String {
-    let mut out = String::from("/// Instructions per unit of each term, in [`Term`] order.\n");
-    out.push_str("pub const COST: [u32; TERMS] = [\n");
+fn array(cost: &[u32]) -> String {
+    let mut out = String::from("pub const COST: [u32; TERMS] = [\n");
     let mut line = String::from("   ");
     for c in cost {
         let item = format!(" {c},");
@@ -416,6 +531,53 @@ fn source(cost: &[u32]) -> String {
 
 #[cfg(test)]
 mod tests {
+    use super::{COST, Error, TERMS, pair, parse};
+
+    #[test]
+    fn a_console_is_read_line_by_line() {
+        let run = parse("boot\ncost 1 320 100 2 1 3 4\nfailed 2\n", "t").unwrap();
+        assert_eq!(run.failed, 1);
+        assert_eq!(run.lines.len(), 1);
+        assert_eq!(run.lines[0].line, 2);
+        assert_eq!(run.lines[0].head, [1, 320, 100, 2, 1]);
+        assert_eq!(run.lines[0].units, [3, 4]);
+    }
+
+    #[test]
+    fn a_bad_line_names_its_line_and_field() {
+        let err = parse("cost 1 320 100 2 1\ncost 3 x 1 1 1\n", "t").unwrap_err();
+        assert!(
+            matches!(&err, Error::Parse { line: 2, field, .. } if field == "ticks"),
+            "{err}"
+        );
+        let err = parse("cost 1 320\n", "t").unwrap_err();
+        assert!(
+            matches!(&err, Error::Parse { line: 1, field, .. } if field == "work"),
+            "{err}"
+        );
+    }
+
+    /// One unit of term 0: the work must be `COST[0]`, else the runs were
+    /// not built from the same model.
+    #[test]
+    fn the_runs_must_count_alike() {
+        let mut units = vec!["0"; TERMS];
+        units[0] = "1";
+        let terms = format!("cost 0 9 9 1 1 {}\n", units.join(" "));
+        let terms = parse(&terms, "terms").unwrap();
+        let current: Vec<u64> = COST.iter().map(|&c| u64::from(c)).collect();
+        let ok = parse(&format!("cost 0 32 {} 1 1\n", COST[0]), "plain").unwrap();
+        let solves = pair(&ok, &terms, &current).unwrap();
+        assert_eq!(solves[0].instructions, 10.0);
+        let off = parse(&format!("cost 0 32 {} 1 1\n", COST[0] + 1), "plain").unwrap();
+        assert!(matches!(pair(&off, &terms, &current), Err(Error::Runs(_))));
+        let other = parse(&format!("cost 0 32 {} 2 1\n", COST[0]), "plain").unwrap();
+        assert!(matches!(
+            pair(&other, &terms, &current),
+            Err(Error::Runs(_))
+        ));
+    }
+
     /// The array as rustfmt laid it out in `shared/src/solve/cost.rs`: a
     /// line that would reach 100 columns is wrapped.
     #[test]
@@ -424,11 +586,10 @@ mod tests {
             3945, 10, 360, 0, 0, 175, 112, 184, 30, 60, 203, 60, 11, 802, 71, 205, 54, 40, 93, 24,
             100, 483, 183, 59, 33, 0, 0, 187,
         ];
-        let want = "/// Instructions per unit of each term, in [`Term`] order.
-pub const COST: [u32; TERMS] = [
+        let want = "pub const COST: [u32; TERMS] = [
     3945, 10, 360, 0, 0, 175, 112, 184, 30, 60, 203, 60, 11, 802, 71, 205, 54, 40, 93, 24, 100,
     483, 183, 59, 33, 0, 0, 187,
 ];";
-        assert_eq!(super::source(&cost), want);
+        assert_eq!(super::array(&cost), want);
     }
 }
