@@ -22,7 +22,9 @@
 //! ```
 //!
 //! Then it solves the linear program "the smallest total relative excess
-//! `Σᵢ (c·uᵢ)/mᵢ` with every solve bounded, `c·uᵢ ≥ mᵢ`, `c ≥ 0`" (module
+//! `Σᵢ (c·uᵢ)/mᵢ` with every solve bounded with a margin,
+//! `c·uᵢ ≥ (1 + margin)·mᵢ`, `c ≥ 0`" (`-- --margin P`, in percent;
+//! default [`MARGIN`]) (module
 //! `fit`, by the simplex method of module `simplex`), rounds each
 //! coefficient up to an integer, checks that every solve is still bounded
 //! (raising a coefficient where one is not, and saying so), and prints the
@@ -75,6 +77,12 @@ const OUTER_ENV: [&str; 11] = [
     "CLIPPY_ARGS",
     "RUSTDOC",
 ];
+
+/// The bound's margin by default, percent. Fitted with none, the model
+/// bounded the `cost` binary's solves but under-counted a live-loop
+/// frame's solve by about 4 % (README, "Real time"): the live loop's
+/// problems are not the binary's.
+const MARGIN: f64 = 5.0;
 
 /// The most rounds of `--write`.
 const ROUNDS: usize = 6;
@@ -137,7 +145,7 @@ enum Error {
     #[error(transparent)]
     Fit(#[from] fit::FitError),
     /// Unknown arguments.
-    #[error("unknown arguments {0:?}: the only option is --write")]
+    #[error("arguments {0:?}: the options are --write and --margin P (percent, 0 to 100)")]
     Usage(String),
     /// The firmware printed no solves.
     #[error("the cost firmware printed no solves")]
@@ -172,24 +180,20 @@ fn main() {
 }
 
 fn run() -> Result<(), Error> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let write = match args.as_slice() {
-        [] => false,
-        [w] if w == "--write" => true,
-        _ => return Err(Error::Usage(args.join(" "))),
-    };
+    let (write, margin) = options(std::env::args().skip(1).collect())?;
+    println!("margin: every solve bounded with {margin} % to spare");
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let mut current: Vec<u64> = COST.iter().map(|&c| u64::from(c)).collect();
     let mut all = vec![];
     for round in 1..=ROUNDS {
         let solves = measure(&repo, &current)?;
         let [least, ..] = fit::ratios(&current, &solves).ok_or(Error::NoSolves)?;
-        if round > 1 && least >= 1.0 {
+        if round > 1 && least >= 1.0 + margin / 100.0 {
             println!("round {round}: the written COST bounds every solve of its own run");
             return Ok(());
         }
         all.extend(solves);
-        let cost = refit(&all, &current)?;
+        let cost = refit(&all, &current, margin)?;
         if !write {
             println!(
                 "a new COST changes which steps a budget affords, so it may not bound the \
@@ -233,10 +237,39 @@ fn measure(repo: &Path, current: &[u64]) -> Result<Vec<Solve>, Error> {
     Ok(solves)
 }
 
-/// Fits `solves`, rounds up, bounds every solve again and reports; terms
-/// no solve uses keep their `current` coefficient.
-fn refit(solves: &[Solve], current: &[u64]) -> Result<Vec<u64>, Error> {
+/// `--write` and `--margin P` (percent, default [`MARGIN`]).
+fn options(args: Vec<String>) -> Result<(bool, f64), Error> {
+    let (mut write, mut margin) = (false, MARGIN);
+    let mut rest = args.iter();
+    while let Some(a) = rest.next() {
+        match a.as_str() {
+            "--write" => write = true,
+            "--margin" => {
+                margin = rest
+                    .next()
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .filter(|m| (0.0..100.0).contains(m))
+                    .ok_or_else(|| Error::Usage(args.join(" ")))?;
+            }
+            _ => return Err(Error::Usage(args.join(" "))),
+        }
+    }
+    Ok((write, margin))
+}
+
+/// Fits `solves` with their instructions raised by `margin` percent,
+/// rounds up, bounds every solve again and reports; terms no solve uses
+/// keep their `current` coefficient.
+fn refit(solves: &[Solve], current: &[u64], margin: f64) -> Result<Vec<u64>, Error> {
     let start = Instant::now();
+    let raised: Vec<Solve> = solves
+        .iter()
+        .map(|s| Solve {
+            instructions: s.instructions * (1.0 + margin / 100.0),
+            ..s.clone()
+        })
+        .collect();
+    let (measured, solves) = (solves, raised.as_slice());
     let fitted = fit::fit(solves, TERMS)?;
     let mut cost = fit::round_up(&fitted.exact);
     for &j in &fitted.unused {
@@ -249,7 +282,8 @@ fn refit(solves: &[Solve], current: &[u64]) -> Result<Vec<u64>, Error> {
     if let Some(s) = short {
         return Err(Error::Unbounded(s.id));
     }
-    report(solves, &fitted, current, &cost, &bumps)?;
+    // The ratios against the instructions as measured.
+    report(measured, &fitted, current, &cost, &bumps)?;
     println!("fitted in {:.1} s", start.elapsed().as_secs_f64());
     Ok(cost)
 }
@@ -454,7 +488,7 @@ fn report(
     bumps: &[Bump],
 ) -> Result<(), Error> {
     println!(
-        "linear program over {} solves: {} pivots, mean counted/measured {:.4}",
+        "linear program over {} solves: {} pivots, mean counted/(measured with the margin) {:.4}",
         solves.len(),
         fitted.pivots,
         fitted.mean_ratio

@@ -18,8 +18,8 @@
 //! rounds and factorisation passes. Where the size depends on what the step
 //! will find (a joint limit that clamps, a rejected trial, which rotations
 //! the forward kinematics must compute again), the model counts the most the
-//! step can do. So a solve's count bounds its instructions, usually from 5
-//! to 40 % above.
+//! step can do. So a solve's count bounds its instructions (by how much is
+//! measured in README's "Real time").
 //!
 //! Before each iteration the solver plans the most it can afford: a step
 //! with every round and clamping pass, or fewer passes (the step is then
