@@ -16,8 +16,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::{env, fs};
 
-/// The firmware's target triple (as in `firmware/.cargo/config.toml`).
-const TARGET: &str = "thumbv7em-none-eabihf";
+include!("firmware_build.rs");
+
 /// The demo's data, relative to the repository root.
 const DEMO_DATA: [&str; 11] = [
     "data/builds/reach_humanoid16.toml",
@@ -31,22 +31,6 @@ const DEMO_DATA: [&str; 11] = [
     "data/hdm05_bk/HDM_bk_depositFloorR_009_120.amc",
     "data/hdm05_bk/HDM_bk_depositFloorR_011_120.amc",
     "data/recordings/reach_hdm05_007.csv",
-];
-
-/// Environment a build script inherits from the outer cargo that must not
-/// reach the firmware's cargo: flags, target and wrappers for the host build.
-const OUTER_ENV: [&str; 11] = [
-    "RUSTFLAGS",
-    "CARGO_ENCODED_RUSTFLAGS",
-    "CARGO_BUILD_RUSTFLAGS",
-    "CARGO_BUILD_TARGET",
-    "CARGO_TARGET_DIR",
-    "CARGO_BUILD_TARGET_DIR",
-    "RUSTC",
-    "RUSTC_WRAPPER",
-    "RUSTC_WORKSPACE_WRAPPER",
-    "CLIPPY_ARGS",
-    "RUSTDOC",
 ];
 
 fn main() {

@@ -59,24 +59,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-/// The firmware's target triple (`firmware/.cargo/config.toml`).
-const TARGET: &str = "thumbv7em-none-eabihf";
-
-/// Environment of the outer cargo that must not reach the firmware's build
-/// (flags, target and wrappers for the host build; as in `host/build.rs`).
-const OUTER_ENV: [&str; 11] = [
-    "RUSTFLAGS",
-    "CARGO_ENCODED_RUSTFLAGS",
-    "CARGO_BUILD_RUSTFLAGS",
-    "CARGO_BUILD_TARGET",
-    "CARGO_TARGET_DIR",
-    "CARGO_BUILD_TARGET_DIR",
-    "RUSTC",
-    "RUSTC_WRAPPER",
-    "RUSTC_WORKSPACE_WRAPPER",
-    "CLIPPY_ARGS",
-    "RUSTDOC",
-];
+include!("../../host/firmware_build.rs");
 
 /// The bound's margin by default, percent. Fitted with none, the model
 /// bounded the `cost` binary's solves but under-counted a live-loop

@@ -972,6 +972,24 @@ pub(super) fn entry(slot: &Slot, da: bool, db: bool, translation: bool, w: Vec3,
     }
 }
 
+/// For tests: the slots of the work's goals (heaviest weight `wmax`) and
+/// the joints laid out for them by [`Solver::DEFAULT`], placed and
+/// evaluated at the work's angles.
+#[cfg(test)]
+pub(super) fn laid_out<const N: usize>(
+    work: &mut Work<'_, '_, N>,
+    wmax: f32,
+) -> (Slots, Joints<N>) {
+    work.check().unwrap();
+    let mut slots = Slots::EMPTY;
+    slots.init(work.goals, wmax).unwrap();
+    let mut joints = Joints::<N>::EMPTY;
+    joints.init(&Solver::DEFAULT, work, &slots);
+    joints.forward(work);
+    slots.evaluate(work).unwrap();
+    (slots, joints)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1030,13 +1048,7 @@ mod tests {
         let mut pose = Pose::<32>::default();
         let mut angles = a;
         let mut work = Work::new(&body, &goals, &mut angles, &mut pose);
-        work.check().unwrap();
-        let mut slots = Slots::EMPTY;
-        slots.init(&goals, 4.0).unwrap();
-        let mut joints = Joints::<32>::EMPTY;
-        joints.init(&Solver::DEFAULT, &work, &slots);
-        joints.forward(&mut work);
-        slots.evaluate(&work).unwrap();
+        let (slots, mut joints) = laid_out(&mut work, 4.0);
         joints.settle(&slots, 0.0);
         joints.linearise(&work, &slots).unwrap();
         let point = |a: &Angles<32>, g: &Goal| {

@@ -597,8 +597,8 @@ mod tests {
     use crate::body::{Angles, cmu};
     use crate::goal::Goal;
     use crate::pose::Pose;
-    use crate::solve::slots::Slots;
-    use crate::solve::{Solver, Work};
+    use crate::solve::Work;
+    use crate::solve::joints::laid_out;
 
     /// The coupling [`System::assemble`] finds from each live group's goal
     /// mask is the one its links give: for every awake pair of slots `s ≤
@@ -617,13 +617,7 @@ mod tests {
             Goal::reach(cmu::index::RIGHT_FOOT, Vec3::new(-0.1, 0.0, 0.1), 1.0),
         ];
         let mut work = Work::new(&body, &goals, &mut angles, &mut pose);
-        work.check().unwrap();
-        let mut slots = Slots::EMPTY;
-        slots.init(&goals, 4.0).unwrap();
-        let mut joints = Joints::<32>::EMPTY;
-        joints.init(&Solver::DEFAULT, &work, &slots);
-        joints.forward(&mut work);
-        slots.evaluate(&work).unwrap();
+        let (mut slots, mut joints) = laid_out(&mut work, 4.0);
         let mut checked = 0;
         for (met, awake) in [(0u16, 0b1111u16), (0b0100, 0b1011), (0b1001, 0b0110)] {
             for (j, slot) in slots.s.iter_mut().enumerate().take(4) {
