@@ -42,7 +42,9 @@
 //! needs a new fit: `cargo run --release -p marionette-tests --example
 //! fit_cost` measures, fits and prints the new [`COST`]
 //! (`tests/examples/fit_cost.rs`); with `-- --write` it writes it here and
-//! refits until it bounds the solves it leads to.
+//! refits until it bounds the solves it leads to, and `-- --margin P` fits
+//! every solve with `P` % to spare (default 5: the live loop's problems are
+//! not the binary's).
 
 /// The terms of the model: what each coefficient of [`COST`] is paid per.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
