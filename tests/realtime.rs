@@ -27,11 +27,8 @@ fn repo() -> PathBuf {
 /// the first frame.
 const BUDGET: u32 = 40_000;
 
-/// About the least budget at which the bundled rig's solver plans one
-/// iteration a frame (the fixed part of a warm solve is about 9,000 of the
-/// cost model, an iteration 19,000 more with a rejection reserved): the
-/// loop's own budget once the rest of a 1 kHz frame fits 30,600
-/// instructions.
+/// A budget a little above the least at which the bundled rig's solver
+/// plans one iteration a frame (`deadline::MIN_SOLVE_BUDGET`).
 const TIGHT: u32 = 30_000;
 
 /// No limit.
@@ -184,6 +181,7 @@ fn goals_converge_over_frames_within_a_budget() {
     for (name, budget) in [
         ("40,000", Some(Budget::uniform(BUDGET))),
         ("30,000", Some(Budget::uniform(TIGHT))),
+        ("the loop's own", None),
     ] {
         let held = native(&inputs.region, &inputs.session, budget);
         let f = follow(&held, &free);
@@ -201,12 +199,21 @@ fn goals_converge_over_frames_within_a_budget() {
         assert!(!held[0].solve.converged, "{:?}", held[0].solve);
         assert!(apart(&held[0], &free[0]) > 1e-3);
         assert!(f.caught_up <= 10, "{f:?}");
-        // Over the recording, the goals are where the loop without a
-        // budget puts them (within 0.1 mm) on at least 90 % of the frames,
-        // and a frame the budget cuts short is caught up within 30 frames.
         assert!(f.stopped > 100, "the budget never binds: {f:?}");
-        assert!(f.off * 10 <= held.len(), "{f:?}");
-        assert!(f.longest <= 30, "{f:?}");
+        if budget.is_some() {
+            // Over the recording, the goals are where the loop without a
+            // budget puts them (within 0.1 mm) on at least 90 % of the
+            // frames, and a frame the budget cuts short is caught up within
+            // 30 frames.
+            assert!(f.off * 10 <= held.len(), "{f:?}");
+            assert!(f.longest <= 30, "{f:?}");
+        } else {
+            // The loop's own budget keeps every frame in its period, so a
+            // frame whose synthesis adjusted the parameters does not solve:
+            // at least 80 % of the frames, caught up within 150 frames.
+            assert!(f.off * 5 <= held.len(), "{f:?}");
+            assert!(f.longest <= 150, "{f:?}");
+        }
     }
 }
 
@@ -267,24 +274,15 @@ fn every_frame_keeps_the_solvers_budget_on_the_emulated_board() {
             deadline::CLOCK_HZ / 1_000_000,
             f64::from(deadline::CPI_PERCENT) / 100.0
         );
-        // With the loop's own budget a frame exceeds the period's
+        // With the loop's own budget no frame exceeds the period's
         // instructions (at the cycles per instruction of
         // `deadline::CPI_PERCENT`, the realistic model of
-        // `../shared/tools/cycles`) only where the solver's floor rules, and
-        // by at most the floor's excess over what the period leaves.
+        // `../shared/tools/cycles`): the period leaves this rig's plain frame
+        // more than the floor, so the budget is what the period leaves.
         if budget.is_none() {
-            let excess = (reserve[1] + deadline::MIN_SOLVE_BUDGET).saturating_sub(frame);
-            assert!(worst <= f64::from(frame + excess), "worst {worst:.0}");
-            for (m, c) in measured.iter().zip(&counted) {
-                if m.total > f64::from(frame) {
-                    assert_eq!(
-                        c.solve.budget,
-                        deadline::MIN_SOLVE_BUDGET,
-                        "frame {}",
-                        m.seq
-                    );
-                }
-            }
+            let own = Budget::for_rig(inputs.period_us, deadline::CLOCK_HZ, segments);
+            assert!(own.plain >= deadline::MIN_SOLVE_BUDGET, "{own:?}");
+            assert_eq!(over, 0, "worst {worst:.0}, period {frame}");
         }
     }
     println!(
@@ -328,8 +326,8 @@ fn the_warm_solve_at_1_khz_meets_every_goal_on_the_emulated_board() {
 /// Budgets around what a 1 kHz `humanoid16` frame leaves the solver: how
 /// many frames iterate and how closely the goals follow the loop without a
 /// budget (README, "Real time", prints this table), for uniform budgets and
-/// for the loop's own budget without its floor (what the period leaves a
-/// plain and an adjusted frame). More budget never follows worse, and
+/// for the loop's own budget (what the period leaves a plain and an
+/// adjusted frame). More budget never follows worse, and
 /// below the least whole-tree iteration nothing iterates.
 #[test]
 fn the_budget_sweep_around_the_period() {
@@ -339,17 +337,22 @@ fn the_budget_sweep_around_the_period() {
         .rig
         .map(|r| r.body().len())
         .unwrap();
-    let frame = deadline::frame_instructions(inputs.period_us, deadline::CLOCK_HZ);
-    let left = |adjusted| frame.saturating_sub(deadline::reserve(segments, adjusted));
-    let strict = Budget {
-        plain: left(false),
-        adjusted: left(true),
-    };
+    let own = Budget::for_rig(inputs.period_us, deadline::CLOCK_HZ, segments);
     let mut last_within = 0usize;
     let uniform = [
-        24_000, 25_000, 26_000, 26_500, 27_000, 27_500, 28_000, 28_500, 29_500, TIGHT,
+        24_000,
+        25_000,
+        26_000,
+        26_500,
+        deadline::MIN_SOLVE_BUDGET,
+        27_000,
+        27_500,
+        28_000,
+        28_500,
+        29_500,
+        TIGHT,
     ];
-    let budgets = uniform.map(Budget::uniform).into_iter().chain([strict]);
+    let budgets = uniform.map(Budget::uniform).into_iter().chain([own]);
     for (k, budget) in budgets.enumerate() {
         let held = native(&inputs.region, &inputs.session, Some(budget));
         let iterated = held.iter().filter(|s| s.solve.iterations > 0).count();
@@ -379,6 +382,14 @@ fn the_budget_sweep_around_the_period() {
         }
         if budget.plain <= 26_500 {
             assert_eq!(iterated, 0, "{budget:?}");
+        }
+        // From the floor up, one factorisation pass a frame (the solver's
+        // warm active set) keeps the goals within 0.1 mm of the unlimited
+        // loop on at least 88 % of the frames; the loop's own budget, which
+        // leaves the adjusted frames no iteration, on at least 80 %.
+        if budget.plain >= deadline::MIN_SOLVE_BUDGET {
+            let least = if k < uniform.len() { 0.88 } else { 0.8 };
+            assert!(within(1e-4) as f64 >= least * n, "{budget:?}");
         }
     }
 }

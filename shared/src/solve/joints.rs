@@ -121,6 +121,15 @@ pub(super) struct Dofs {
     /// The values before the step.
     back: Vec3,
     pub lever: f32,
+    /// The warm active set: `+1` (`-1`) where the last step carried the DOF
+    /// through its upper (lower) limit and the goals still push it there;
+    /// the next step starts with it at that limit (see [`super::system`]).
+    pub pin: Vec3,
+    /// Whether any of `pin` is set (one test per group on the hot paths).
+    pub pinned: bool,
+    /// The `1 / D` of each DOF that this step holds at its pin (0 for the
+    /// others), for the test that lets it go.
+    pub held_inv: Vec3,
 }
 
 /// One goal moved by a group, with the group's scaled column per DOF.
@@ -159,6 +168,9 @@ const NO_DOFS: Dofs = Dofs {
     delta: Vec3::ZERO,
     back: Vec3::ZERO,
     lever: 0.0,
+    pin: Vec3::ZERO,
+    pinned: false,
+    held_inv: Vec3::ZERO,
 };
 const NO_LINK: Link = Link {
     slot: 0,
@@ -363,6 +375,10 @@ impl<const N: usize> Joints<N> {
             return FIXED;
         };
         *slot = g;
+        // A new layout: no DOF is pinned.
+        if let Some(d) = self.dofs.get_mut(self.count) {
+            (d.pin, d.pinned) = (Vec3::ZERO, false);
+        }
         self.count += 1;
         u8::try_from(self.count - 1).unwrap_or(FIXED)
     }

@@ -21,6 +21,23 @@
 //! is held, its motion is taken out of the residual and the others are solved
 //! again (a few rounds). A satisfied one-sided plane waits on standby and joins
 //! the step only if the step would carry its point through the plane.
+//!
+//! The warm active set: a DOF that the last step carried through a limit is
+//! *pinned* there ([`Dofs::pin`](super::joints::Dofs)). While that limit is
+//! within [`PIN_ROOM`], a next step whose plan affords fewer than
+//! [`CLAMP_PASSES`] passes (a live frame's budget) starts with the DOF
+//! moved to it and held, its motion taken out of the residual, as a
+//! clamping round would leave it; it is let go when its own step from the
+//! others' solution, `(J̃ᵀ·y)ᵢ / Dᵢ`, no longer crosses the limit (the
+//! bounded step's Karush–Kuhn–Tucker condition).
+//!
+//! Successive steps on a moving puppet mostly meet the same limits, so one
+//! factorisation pass usually finds the step that took several rounds of
+//! clamping; a live frame whose budget affords one pass
+//! ([`crate::deadline`]) still converges over frames. A step with all its
+//! passes finds the active set by clamping, as without pins, and only
+//! records them: pins held from the start of every step made some offline
+//! solves converge worse (`tests/cli_solve.rs`).
 
 use super::Work;
 use super::joints::{Dofs, Joints, Link, entry, geometry, links_of};
@@ -33,6 +50,10 @@ pub(super) const CLAMP_PASSES: usize = 3;
 /// The damping floor's lever, m: below it a DOF is damped as if its goals
 /// were this far from its axis.
 const LEVER: f32 = 0.1;
+/// How near its limit a pinned DOF must be to start the step there, rad
+/// (or m): farther, the pose has moved off the limit since, and it takes
+/// part as any other.
+const PIN_ROOM: f32 = 0.05;
 
 /// Blocks of the packed lower block triangle.
 const BLOCKS: usize = MAX_GOALS * (MAX_GOALS + 1) / 2;
@@ -141,7 +162,8 @@ impl System {
             if round > 0 {
                 joints.sums(slots, self.awake, r);
             }
-            self.assemble(joints, slots.count, lambda2);
+            let pins = passes < CLAMP_PASSES;
+            self.assemble(joints, (slots.count, lambda2, pins), r);
             if !self.solve(joints, slots.count, r, passes) {
                 return false;
             }
@@ -162,7 +184,7 @@ impl System {
 
     /// Solves for the step, clamping at the limits (at most `passes`, and
     /// [`CLAMP_PASSES`]; the motion of the DOFs held at a limit is taken out
-    /// of `r`); false if the matrix is singular.
+    /// of `r`) for `n` goals; false if the matrix is singular.
     fn solve<const N: usize>(
         &mut self,
         joints: &mut Joints<N>,
@@ -188,8 +210,14 @@ impl System {
     }
 
     /// Every DOF's damping ([`damp`]) and `J̃·D⁻¹·J̃ᵀ + I` over the DOFs
-    /// that take part.
-    fn assemble<const N: usize>(&mut self, joints: &mut Joints<N>, n: usize, lambda2: f32) {
+    /// that take part for `n` goals at damping `λ²`; with `pins`, the pinned
+    /// DOFs start at their limits, their motion taken out of `r`.
+    fn assemble<const N: usize>(
+        &mut self,
+        joints: &mut Joints<N>,
+        (n, lambda2, pins): (usize, f32, bool),
+        r: &mut Rhs,
+    ) {
         // Which goals share a joint depends only on the layout and the
         // awake goals.
         let key = (self.awake, joints.unmet());
@@ -218,6 +246,12 @@ impl System {
             }
             damp(d, lambda2);
             let links = links_of(links, g);
+            if d.pinned {
+                let moved = start_pinned(d, pins);
+                if moved != Vec3::ZERO {
+                    take_out(links, self.awake, moved, r);
+                }
+            }
             outer(&mut self.a, links, self.awake, d.inv_d);
             if !known {
                 couple(&mut self.coupled, g.dep_a | g.dep_b, self.awake);
@@ -290,6 +324,91 @@ fn damp(d: &mut Dofs, lambda2: f32) {
     d.delta = Vec3::ZERO;
 }
 
+/// After [`damp`], with `pins`, moves each DOF pinned near its limit
+/// ([`PIN_ROOM`]) to it and holds it there, keeping its `1 / D` for the KKT
+/// test ([`repin`]); returns the motion.
+#[inline(never)]
+fn start_pinned(d: &mut Dofs, pins: bool) -> Vec3 {
+    if !pins {
+        d.held_inv = Vec3::ZERO;
+        return Vec3::ZERO;
+    }
+    // (1 / D, 1 / D kept for the KKT test, step).
+    let at = |pin: f32, inv: f32, lo: f32, hi: f32| {
+        if pin > 0.0 && hi <= PIN_ROOM {
+            (0.0, inv, math::max(hi, 0.0))
+        } else if pin < 0.0 && lo >= -PIN_ROOM {
+            (0.0, inv, math::min(lo, 0.0))
+        } else {
+            (inv, 0.0, 0.0)
+        }
+    };
+    let (p, id, lo, hi) = (d.pin, d.inv_d, d.lo, d.hi);
+    let (x, y, z) = (
+        at(p.x, id.x, lo.x, hi.x),
+        at(p.y, id.y, lo.y, hi.y),
+        at(p.z, id.z, lo.z, hi.z),
+    );
+    d.inv_d = Vec3::new(x.0, y.0, z.0);
+    d.held_inv = Vec3::new(x.1, y.1, z.1);
+    d.delta = Vec3::new(x.2, y.2, z.2);
+    d.delta
+}
+
+/// Takes the motion `moved` of a group's DOFs out of the awake slots'
+/// residuals in `target`.
+#[inline(always)]
+fn take_out(links: &[Link], awake: u16, moved: Vec3, target: &mut Rhs) {
+    for l in links.iter().filter(|l| awake >> l.slot & 1 != 0) {
+        if let Some(t) = target.get_mut(usize::from(l.slot)) {
+            *t -= l.cols * moved;
+        }
+    }
+}
+
+/// Each DOF's pin after a pass ([`Dofs::pin`](super::joints::Dofs)), from
+/// its step and `cy = J̃ᵀ·y`. Only for a group with a pin or a step through
+/// a limit: otherwise none is pinned and none becomes so.
+#[inline(always)]
+fn repin(d: &mut Dofs, cy: Vec3) {
+    // A pinned DOF's step from the others' solution, `cy / D`: pinned while
+    // it is through the limit, the bounded step's KKT condition (`cy > D·hi`
+    // at an upper limit).
+    let free = cy * d.held_inv;
+    let (p, id, held, x, lo, hi) = (d.pin, d.inv_d, d.held_inv, d.delta, d.lo, d.hi);
+    d.pin = Vec3::new(
+        pin_of((p.x, id.x, held.x), (x.x, free.x), (lo.x, hi.x)),
+        pin_of((p.y, id.y, held.y), (x.y, free.y), (lo.y, hi.y)),
+        pin_of((p.z, id.z, held.z), (x.z, free.z), (lo.z, hi.z)),
+    );
+    d.pinned = d.pin != Vec3::ZERO;
+}
+
+/// A DOF's pin after a pass: one that takes part (`id ≠ 0`) is pinned where
+/// its step `x` crosses a limit; one pinned and held (`held`: its `1 / D`)
+/// stays so while its step from the others' solution, `free`, is through
+/// that limit, and is let go otherwise; one held by the gradient ([`damp`])
+/// keeps its pin.
+#[inline(always)]
+fn pin_of((pin, id, held): (f32, f32, f32), (x, free): (f32, f32), (lo, hi): (f32, f32)) -> f32 {
+    let through = |x: f32| {
+        if x > hi {
+            1.0
+        } else if x < lo {
+            -1.0
+        } else {
+            0.0
+        }
+    };
+    if id != 0.0 {
+        through(x)
+    } else if held == 0.0 || through(free) == pin {
+        pin
+    } else {
+        0.0
+    }
+}
+
 /// The step `D⁻¹·J̃ᵀ·y` of every DOF that takes part; unless `last`, DOFs
 /// that would cross a limit move to it and stop taking part, their motion
 /// taken out of `target` and their columns out of `a`. Returns whether any
@@ -320,16 +439,17 @@ fn spread<const N: usize>(
             free(d.inv_d.y, step.y, d.delta.y),
             free(d.inv_d.z, step.z, d.delta.z),
         );
-        if last {
+        let (x, lo, hi, id) = (d.delta, d.lo, d.hi, d.inv_d);
+        let inside = |x: f32, lo: f32, hi: f32| x <= hi && x >= lo;
+        let within = inside(x.x, lo.x, hi.x) && inside(x.y, lo.y, hi.y) && inside(x.z, lo.z, hi.z);
+        if !within || d.pinned {
+            repin(d, cy);
+        }
+        // Mostly so: nothing crosses a limit.
+        if last || within {
             continue;
         }
         // Move to the limit, hold there, solve the rest for what is left.
-        let (x, lo, hi, id) = (d.delta, d.lo, d.hi, d.inv_d);
-        let inside = |x: f32, lo: f32, hi: f32| x <= hi && x >= lo;
-        if inside(x.x, lo.x, hi.x) && inside(x.y, lo.y, hi.y) && inside(x.z, lo.z, hi.z) {
-            // Mostly so: nothing crosses a limit.
-            continue;
-        }
         let over = |id: f32, x: f32, lo: f32, hi: f32| id != 0.0 && (x > hi || x < lo);
         let out = Vec3::new(
             if over(id.x, x.x, lo.x, hi.x) {
@@ -363,12 +483,7 @@ fn spread<const N: usize>(
         let (by, my) = bound(out.y, x.y, lo.y, hi.y);
         let (bz, mz) = bound(out.z, x.z, lo.z, hi.z);
         (d.delta, d.inv_d) = (Vec3::new(bx, by, bz), d.inv_d - out);
-        let moved = Vec3::new(mx, my, mz);
-        for l in links.iter().filter(|l| awake >> l.slot & 1 != 0) {
-            if let Some(t) = target.get_mut(usize::from(l.slot)) {
-                *t -= l.cols * moved;
-            }
-        }
+        take_out(links, awake, Vec3::new(mx, my, mz), target);
         outer(a, links, awake, -out);
         clamped = true;
     }
@@ -610,12 +725,7 @@ mod tests {
         let body = cmu::BODY;
         let mut angles = Angles::<32>::rest(&body).unwrap();
         let mut pose = Pose::<32>::default();
-        let goals = [
-            Goal::reach(cmu::index::LEFT_HAND, Vec3::new(0.3, 1.0, 0.2), 1.0),
-            Goal::reach(cmu::index::RIGHT_HAND, Vec3::new(-0.3, 1.0, 0.2), 2.0).in_frame(1),
-            Goal::reach(cmu::index::LEFT_FOOT, Vec3::new(0.1, 0.0, 0.1), 4.0),
-            Goal::reach(cmu::index::RIGHT_FOOT, Vec3::new(-0.1, 0.0, 0.1), 1.0),
-        ];
+        let goals = four_goals();
         let mut work = Work::new(&body, &goals, &mut angles, &mut pose);
         let (mut slots, mut joints) = laid_out(&mut work, 4.0);
         let mut checked = 0;
@@ -630,7 +740,7 @@ mod tests {
             joints.linearise(&work, &slots).unwrap();
             let mut system = System::EMPTY;
             system.awake = awake;
-            system.assemble(&mut joints, 4, 0.01);
+            system.assemble(&mut joints, (4, 0.01, false), &mut [Vec3::ZERO; MAX_GOALS]);
             let links = &joints.links;
             let mut direct = [0u16; MAX_GOALS];
             for g in joints.groups().iter().filter(|g| g.live) {
@@ -684,6 +794,200 @@ mod tests {
         let r0 = a00 * y[0] + a10.transpose() * y[1] - b0;
         let r1 = a10 * y[0] + a11 * y[1] - b1;
         assert!(r0.length() < 1e-5 && r1.length() < 1e-5, "{r0} {r1}");
+    }
+
+    /// Both hands and both feet of the CMU skeleton, one in another
+    /// segment's frame.
+    fn four_goals() -> [Goal; 4] {
+        [
+            Goal::reach(cmu::index::LEFT_HAND, Vec3::new(0.3, 1.0, 0.2), 1.0),
+            Goal::reach(cmu::index::RIGHT_HAND, Vec3::new(-0.3, 1.0, 0.2), 2.0).in_frame(1),
+            Goal::reach(cmu::index::LEFT_FOOT, Vec3::new(0.1, 0.0, 0.1), 4.0),
+            Goal::reach(cmu::index::RIGHT_FOOT, Vec3::new(-0.1, 0.0, 0.1), 1.0),
+        ]
+    }
+
+    /// Columns of the dense reference below (the CMU path's DOFs).
+    const COLS: usize = 96;
+    /// Its rows: three per slot.
+    const ROWS: usize = 3 * MAX_GOALS;
+
+    /// Solves `m·x = v` (the first `n` unknowns) by Gaussian elimination
+    /// with partial pivoting, in `f64`: the slow, obvious reference.
+    fn eliminate(m: &mut [[f64; COLS]; COLS], v: &mut [f64; COLS], n: usize) -> [f64; COLS] {
+        for k in 0..n {
+            let p = (k..n)
+                .max_by(|&a, &b| m[a][k].abs().total_cmp(&m[b][k].abs()))
+                .unwrap();
+            m.swap(k, p);
+            v.swap(k, p);
+            let pivot = m[k];
+            for i in k + 1..n {
+                let f = m[i][k] / pivot[k];
+                for (x, &y) in m[i].iter_mut().zip(&pivot).take(n).skip(k) {
+                    *x -= f * y;
+                }
+                v[i] -= f * v[k];
+            }
+        }
+        let mut x = [0.0; COLS];
+        for k in (0..n).rev() {
+            let tail: f64 = (k + 1..n).map(|j| m[k][j] * x[j]).sum();
+            x[k] = (v[k] - tail) / m[k][k];
+        }
+        x
+    }
+
+    /// The damped least-squares step of the DOFs that take part with those
+    /// held where the step left them, built densely from the links:
+    /// `(J_Fᵀ·J_F + D_F)·Δ_F = J_Fᵀ·(r̃ − J_H·Δ_H)`, with `D_F = 1 / inv_d`.
+    /// Returns the largest difference from the step in `joints`, relative
+    /// to the largest step.
+    fn dense_step<const N: usize>(joints: &mut Joints<N>, slots: &Slots, awake: u16) -> f64 {
+        let mut j = [[0.0f64; COLS]; ROWS];
+        let (mut held, mut d, mut got) = ([false; COLS], [0.0f64; COLS], [0.0f64; COLS]);
+        let mut n = 0;
+        let (groups, dofs, links) = joints.parts();
+        for (g, dof) in groups.iter().zip(dofs.iter()).filter(|(g, _)| g.live) {
+            for k in 0..usize::from(g.count) {
+                for l in links_of(links, g)
+                    .iter()
+                    .filter(|l| awake >> l.slot & 1 != 0)
+                {
+                    let c = l.cols.col(k);
+                    for (row, x) in c.to_array().into_iter().enumerate() {
+                        j[3 * usize::from(l.slot) + row][n] = f64::from(x);
+                    }
+                }
+                let id = dof.inv_d.to_array()[k];
+                (held[n], got[n]) = (id == 0.0, f64::from(dof.delta.to_array()[k]));
+                d[n] = if id == 0.0 { 0.0 } else { 1.0 / f64::from(id) };
+                n += 1;
+            }
+        }
+        // r̃ less the held DOFs' motion.
+        let mut b = [0.0f64; ROWS];
+        for (t, slot) in slots
+            .iter()
+            .enumerate()
+            .filter(|(t, _)| awake >> t & 1 != 0)
+        {
+            for (row, x) in (slot.r * slot.sw).to_array().into_iter().enumerate() {
+                b[3 * t + row] = f64::from(x);
+            }
+        }
+        for (row, bi) in b.iter_mut().enumerate() {
+            *bi -= (0..n)
+                .filter(|&c| held[c])
+                .map(|c| j[row][c] * got[c])
+                .sum::<f64>();
+        }
+        // The normal equations of the free DOFs (held ones: x = their step).
+        let (mut m, mut v) = ([[0.0f64; COLS]; COLS], [0.0f64; COLS]);
+        for a in 0..n {
+            if held[a] {
+                (m[a][a], v[a]) = (1.0, got[a]);
+                continue;
+            }
+            for c in (0..n).filter(|&c| !held[c]) {
+                m[a][c] = (0..ROWS).map(|row| j[row][a] * j[row][c]).sum();
+            }
+            m[a][a] += d[a];
+            v[a] = (0..ROWS).map(|row| j[row][a] * b[row]).sum();
+        }
+        let x = eliminate(&mut m, &mut v, n);
+        let big = (0..n).map(|c| x[c].abs()).fold(0.0, f64::max);
+        (0..n).map(|c| (x[c] - got[c]).abs()).fold(0.0, f64::max) / big
+    }
+
+    /// The warm active set ([`PIN_ROOM`]): with every joint 0.02 rad from
+    /// both its limits, a step of three clamping passes pins the DOFs it
+    /// carried through them. Fresh joints given those pins then take, in one
+    /// pass, exactly the damped least-squares step of the others with the
+    /// pinned DOFs at their limits (checked against a dense `f64`
+    /// elimination); repeated, the pins settle on a set where no free DOF
+    /// crosses a limit and every pinned one is pushed outwards (the KKT
+    /// conditions of the bounded step). The extreme case: most DOFs end up
+    /// pinned.
+    #[test]
+    fn a_pinned_step_is_the_least_squares_step_with_the_pins_held() {
+        let body = cmu::BODY;
+        let mut angles = Angles::<32>::rest(&body).unwrap();
+        let mut pose = Pose::<32>::default();
+        let goals = four_goals();
+        let mut work = Work::new(&body, &goals, &mut angles, &mut pose);
+        let fresh = |work: &mut Work<'_, '_, 32>| {
+            let (slots, mut joints) = laid_out(work, 4.0);
+            joints.settle(&slots, 1e-8);
+            joints.linearise(work, &slots).unwrap();
+            let (groups, dofs, _) = joints.parts();
+            for (g, d) in groups.iter().zip(dofs) {
+                if !g.translation() {
+                    (d.lo, d.hi) = (Vec3::splat(-0.02), Vec3::splat(0.02));
+                }
+            }
+            (slots, joints)
+        };
+        let pins_of =
+            |joints: &Joints<32>| core::array::from_fn::<Vec3, 32, _>(|i| joints.dofs[i].pin);
+        let mut r = [Vec3::ZERO; MAX_GOALS];
+        let (slots, mut joints) = fresh(&mut work);
+        let mut system = System::EMPTY;
+        assert!(system.step(&work, &mut joints, &slots, &mut r, 0.01, (1, CLAMP_PASSES)));
+        let mut pins = pins_of(&joints);
+        {
+            // The reference on the step with no pins (one pass: nothing held).
+            let (slots, mut joints) = fresh(&mut work);
+            let mut system = System::EMPTY;
+            assert!(system.step(&work, &mut joints, &slots, &mut r, 0.01, (1, 1)));
+            let off = dense_step(&mut joints, &slots, system.awake);
+            assert!(off < 1e-5, "no pins: {off:e} of the dense step");
+        }
+        let pinned = |p: &[Vec3; 32]| {
+            p.iter()
+                .map(|v| v.abs().element_sum() as usize)
+                .sum::<usize>()
+        };
+        assert!(
+            pinned(&pins) >= 3,
+            "the limits must bind: {} pinned",
+            pinned(&pins)
+        );
+        for round in 0..12 {
+            let (slots, mut joints) = fresh(&mut work);
+            for (d, p) in joints.dofs.iter_mut().zip(&pins) {
+                (d.pin, d.pinned) = (*p, *p != Vec3::ZERO);
+            }
+            let mut system = System::EMPTY;
+            assert!(system.step(&work, &mut joints, &slots, &mut r, 0.01, (1, 1)));
+            let off = dense_step(&mut joints, &slots, system.awake);
+            // The pinned DOFs' motion, taken out of `r̃` in `f32`, cancels
+            // most of it: the free steps keep less of `f32`'s precision.
+            assert!(off < 1e-3, "round {round}: {off:e} of the dense step");
+            let (groups, dofs, _) = joints.parts();
+            for ((g, d), given) in groups.iter().zip(dofs.iter()).zip(&pins) {
+                if !g.live || g.translation() {
+                    continue;
+                }
+                for k in 0..usize::from(g.count) {
+                    let (x, pin) = (d.delta.to_array()[k], given.to_array()[k]);
+                    if pin != 0.0 {
+                        assert_eq!(d.inv_d.to_array()[k], 0.0, "a pinned DOF is held");
+                        assert_eq!(x, 0.02 * pin, "a pinned DOF starts at its limit");
+                    }
+                }
+            }
+            let next = pins_of(&joints);
+            if next == pins {
+                // Settled: every DOF inside its limits, the pinned ones on them.
+                for d in joints.dofs.iter().take(joints.count) {
+                    assert!(d.delta.abs().max_element() <= 0.02 + 1e-6, "{:?}", d.delta);
+                }
+                return;
+            }
+            pins = next;
+        }
+        panic!("the pins did not settle in 12 steps");
     }
 
     #[test]
