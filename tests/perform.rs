@@ -262,6 +262,19 @@ fn a_rig_over_the_capacity_is_refused_as_too_large() {
     );
 }
 
+/// The session of `s` with every message from frame 40 on 150 ms late (a
+/// host stall longer than the rig's 100 ms fail-safe), on the emulated
+/// board: its replies and its servo outputs.
+fn stalled_from_frame_40(s: &Setup) -> (perform::Run, Vec<Vec<u16>>) {
+    let mut late = s.session.clone();
+    for sent in late.iter_mut().skip(2 + 40) {
+        sent.time_us += 150_000;
+    }
+    let board = perform::simulate(&s.region, &late).unwrap();
+    let stalled = perform::simulate_outputs(&s.region, &late).unwrap();
+    (board, stalled)
+}
+
 /// A host stall on the way to the board: the messages from frame 40 on
 /// arrive 150 ms late, so the rig's real 100 ms fail-safe eases the servos
 /// towards rest before frame 40 (modelled natively: the core's own clock
@@ -272,12 +285,7 @@ fn a_rig_over_the_capacity_is_refused_as_too_large() {
 #[test]
 fn the_native_replay_follows_the_trips_the_board_reports() {
     let s = setup_with(120, false, None);
-    let mut late = s.session.clone();
-    for sent in late.iter_mut().skip(2 + 40) {
-        sent.time_us += 150_000;
-    }
-    let board = perform::simulate(&s.region, &late).unwrap();
-    let stalled = perform::simulate_outputs(&s.region, &late).unwrap();
+    let (board, stalled) = stalled_from_frame_40(&s);
     let on_time = perform::simulate_outputs(&s.region, &s.session).unwrap();
     let first = (0..stalled.len()).find(|&k| stalled.get(k) != on_time.get(k));
     assert_eq!(
@@ -321,6 +329,36 @@ fn the_native_replay_follows_the_trips_the_board_reports() {
         "{} mismatches",
         followed.mismatches
     );
+}
+
+/// A take of a session the board's fail-safe tripped in (as `live` saves
+/// one from the emulated board: the board's outputs, the first `frames` of
+/// them frame-driven) holds the board's outputs in the board's order, at
+/// times that never go back. The replay that follows a trip runs its
+/// easing ticks after the time of the message that ended it, so sorting
+/// the take's events by those times used to move that message's output
+/// (and the next ones) before the easing: `tests/live.rs`'s `assert_eq!(taken,
+/// outputs)` failed whenever a loaded machine stalled long enough to trip it.
+#[test]
+fn a_take_keeps_the_board_outputs_in_order_around_a_failsafe_trip() {
+    let s = setup_with(120, false, None);
+    let (board, stalled) = stalled_from_frame_40(&s);
+    assert_eq!(perform::reported_trips(&board.replies).len(), 1);
+    let mut frame_targets = stalled.clone();
+    let rest_targets = frame_targets.split_off(s.frames.min(stalled.len()));
+    let run = perform::Run {
+        frame_targets,
+        rest_targets,
+        replies: board.replies.clone(),
+        ..perform::Run::default()
+    };
+    let take = marionette_host::take::Take::of_run("live", &s.region, &s.session, &run).unwrap();
+    let outputs = take.outputs();
+    let taken: Vec<Vec<u16>> = outputs.iter().map(|o| o.2.clone()).collect();
+    assert_eq!(taken.len(), stalled.len());
+    let first = (0..taken.len()).find(|&k| taken[k] != stalled[k]);
+    assert_eq!(first, None, "the take's outputs leave the board's order");
+    assert!(outputs.windows(2).all(|w| w[0].0 <= w[1].0));
 }
 
 /// The emulated board reports its own fail-safe trip: the host goes quiet

@@ -52,7 +52,8 @@ fn stream_at_1_khz_over_a_pty_drops_frames_never_stalls_and_matches_sim() {
         view: Default::default(),
     };
     let t0 = Instant::now();
-    let (summary, replies) = stream::stream(&args).expect("stream completes");
+    let (summary, replies) = stream::stream(&args, &std::sync::atomic::AtomicBool::new(false))
+        .expect("stream completes");
     let took = t0.elapsed();
     assert_eq!(
         board.wait(Duration::from_secs(30)).unwrap(),

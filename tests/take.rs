@@ -369,7 +369,8 @@ fn a_take_from_a_serial_port_holds_the_telemetrys_targets_and_replays() {
         tables: vec![tables],
         view: Default::default(),
     };
-    let (summary, _) = stream::stream(&args).expect("stream completes");
+    let (summary, _) = stream::stream(&args, &std::sync::atomic::AtomicBool::new(false))
+        .expect("stream completes");
     assert_eq!(board.wait(Duration::from_secs(30)).unwrap(), Some(0));
     let take = Take::load(&take_path).unwrap();
     assert_eq!(take.region, region, "the rig file's rig and the tables");

@@ -13,6 +13,7 @@ pub mod cmd;
 pub mod flash;
 pub mod icount;
 pub mod import;
+pub mod interrupt;
 pub mod link;
 pub mod live;
 pub mod locate;

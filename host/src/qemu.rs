@@ -11,8 +11,12 @@
 //!   and its exit status becomes QEMU's.
 //!
 //! Nothing here can hang: every wait has a deadline, and dropping an
-//! [`Emulator`] kills QEMU.
+//! [`Emulator`] kills QEMU. Under a command that handles Ctrl-C itself
+//! (`live`), QEMU runs in a process group of its own, so the terminal's
+//! Ctrl-C reaches only the command, which disarms and checks the board
+//! before it ends it ([`crate::interrupt`]).
 
+use crate::interrupt;
 use std::io::{Read, Write};
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
@@ -232,7 +236,7 @@ impl Emulator {
             .tempdir()?;
         let sockets = [dir.path().join("uart0.sock"), dir.path().join("uart1.sock")];
         let mut cmd = qemu_command(&qemu, config, &Uarts::Sockets(&sockets))?;
-        let mut child = cmd.spawn()?;
+        let mut child = interrupt::spawn(&mut cmd)?;
         let mut readers = Vec::new();
         let stdout = child
             .stdout
@@ -279,7 +283,7 @@ impl Emulator {
             if let Ok(stream) = UnixStream::connect(path) {
                 return Ok(stream);
             }
-            if Instant::now() > give_up || self.child.try_wait()?.is_some() {
+            if Instant::now() > give_up || interrupt::try_wait(&mut self.child)?.is_some() {
                 return Err(QemuError::Connect(path.to_path_buf()));
             }
             thread::sleep(Duration::from_millis(10));
@@ -318,7 +322,7 @@ impl Emulator {
                 break;
             }
             self.remaining()?;
-            if self.child.try_wait()?.is_some() {
+            if interrupt::try_wait(&mut self.child)?.is_some() {
                 break;
             }
             thread::sleep(Duration::from_millis(1));
@@ -346,7 +350,7 @@ impl Emulator {
     pub fn wait_replies(&mut self, done: impl Fn(&[u8]) -> bool) -> Result<(), QemuError> {
         while !self.tracker_out.check(&done) {
             self.remaining()?;
-            if self.child.try_wait()?.is_some() {
+            if interrupt::try_wait(&mut self.child)?.is_some() {
                 break;
             }
             thread::sleep(Duration::from_millis(1));
@@ -368,7 +372,7 @@ impl Emulator {
                 return Ok(true);
             }
             self.remaining()?;
-            if Instant::now() > give_up || self.child.try_wait()?.is_some() {
+            if Instant::now() > give_up || interrupt::try_wait(&mut self.child)?.is_some() {
                 return Ok(self.tracker_out.check(&done));
             }
             thread::sleep(Duration::from_millis(1));
@@ -408,7 +412,7 @@ impl Emulator {
     /// Waits for the firmware to exit and returns what it produced.
     pub fn finish(mut self) -> Result<Output, QemuError> {
         let status = loop {
-            if let Some(status) = self.child.try_wait()? {
+            if let Some(status) = interrupt::try_wait(&mut self.child)? {
                 break status;
             }
             self.remaining()?;
@@ -435,8 +439,7 @@ impl Emulator {
 
 impl Drop for Emulator {
     fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        interrupt::end(&mut self.child);
     }
 }
 
@@ -464,7 +467,7 @@ impl PtyBoard {
             ..Config::new(elf)
         };
         let mut cmd = qemu_command(&qemu, &config, &Uarts::Pty { servo })?;
-        let mut child = cmd.spawn()?;
+        let mut child = interrupt::spawn(&mut cmd)?;
         let stdout = child
             .stdout
             .take()
@@ -479,7 +482,7 @@ impl PtyBoard {
         let pty = loop {
             line.clear();
             if lines.read_line(&mut line)? == 0 {
-                let _ = child.kill();
+                interrupt::end(&mut child);
                 return Err(std::io::Error::other("QEMU exited before naming its pty").into());
             }
             if let Some(rest) = line.split("redirected to ").nth(1)
@@ -508,7 +511,7 @@ impl PtyBoard {
     pub fn wait(&mut self, limit: Duration) -> Result<Option<i32>, QemuError> {
         let deadline = Instant::now() + limit;
         while Instant::now() < deadline {
-            if let Some(status) = self.child.try_wait()? {
+            if let Some(status) = interrupt::try_wait(&mut self.child)? {
                 for r in self.readers.drain(..) {
                     let _ = r.join();
                 }
@@ -532,8 +535,7 @@ impl PtyBoard {
 
 impl Drop for PtyBoard {
     fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        interrupt::end(&mut self.child);
     }
 }
 

@@ -8,14 +8,20 @@
 //! the two (pixels of the views differ).
 #![cfg(feature = "view")]
 
+#[path = "support/recording.rs"]
+mod recording;
+#[path = "support/vmc.rs"]
+mod vmc;
+
 use marionette_host::{perform, rigfile};
-use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
+use recording::repeated_recording;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::Mutex;
 use std::sync::mpsc::Sender;
 use std::time::{Duration, Instant};
+use vmc::vmc_hand;
 
 /// The browser, as Debian installs it.
 fn chromium() -> PathBuf {
@@ -72,30 +78,6 @@ fn pixels(png_bytes: &[u8]) -> (Vec<[u8; 3]>, usize) {
 fn in_views(i: usize, width: usize) -> bool {
     let (x, y) = (i % width, i / width);
     (16..840).contains(&x) && (60..740).contains(&y)
-}
-
-/// The demo's recording played `times` times over, one after the other
-/// (so that the board performs for long enough to be watched twice).
-fn repeated_recording(dir: &Path, times: u64) -> PathBuf {
-    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
-    let text = std::fs::read_to_string(repo.join("data/recordings/reach_hdm05_007.csv")).unwrap();
-    let mut lines = text.lines();
-    let mut out = vec![lines.next().unwrap().to_owned()];
-    let rows: Vec<(u64, &str)> = lines
-        .map(|l| {
-            let (t, rest) = l.split_once(',').unwrap();
-            (t.parse().unwrap(), rest)
-        })
-        .collect();
-    let span = rows.last().unwrap().0 + 1000;
-    for k in 0..times {
-        for (t, rest) in &rows {
-            out.push(format!("{},{rest}", t + k * span));
-        }
-    }
-    let path = dir.join("long.csv");
-    std::fs::write(&path, out.join("\n") + "\n").unwrap();
-    path
 }
 
 /// `marionette ARGS` (a session with its view on a free port); returns it
@@ -241,7 +223,7 @@ static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 fn the_live_view_shows_the_demo_moving_in_a_real_browser() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
-    let recording = repeated_recording(dir.path(), 2);
+    let recording = repeated_recording(dir.path(), 2).0;
     let out = dir.path().join("out");
     let (demo, url) = start_view(
         &[
@@ -309,7 +291,7 @@ fn stream_view_shows_a_board_on_a_serial_port_moving() {
         marionette_host::qemu::PtyBoard::start(&elf, &region, &dir.path().join("uart1.bin"))
             .unwrap();
     // 26 s: long enough for two screenshots however slowly Chromium starts.
-    let recording = repeated_recording(dir.path(), 12);
+    let recording = repeated_recording(dir.path(), 12).0;
     let out = dir.path().join("out");
     let (stream, url) = start_view(
         &[
@@ -336,39 +318,6 @@ fn stream_view_shows_a_board_on_a_serial_port_moving() {
     let status = stream.0.take().unwrap().wait().unwrap();
     assert!(status.success(), "the stream ends cleanly: {status}");
     assert_eq!(board.wait(Duration::from_secs(30)).unwrap(), Some(0));
-}
-
-/// A VMC bundle: the hips still, the right hand (a bone of the hips, in
-/// Unity's frame) on a circle in front of them.
-fn vmc_hand(t: f64) -> Vec<u8> {
-    let bone = |name: &str, v: [f32; 7]| {
-        let mut args = vec![OscType::String(name.into())];
-        args.extend(v.iter().map(|&x| OscType::Float(x)));
-        OscPacket::Message(OscMessage {
-            addr: "/VMC/Ext/Bone/Pos".into(),
-            args,
-        })
-    };
-    let a = (t * std::f64::consts::TAU) as f32;
-    rosc::encoder::encode(&OscPacket::Bundle(OscBundle {
-        timetag: OscTime::from((0, 1)),
-        content: vec![
-            bone("Hips", [0.0, 0.9, 0.0, 0.0, 0.0, 0.0, 1.0]),
-            bone(
-                "RightHand",
-                [
-                    0.25 + 0.15 * a.cos(),
-                    0.35 + 0.15 * a.sin(),
-                    0.25,
-                    0.0,
-                    0.0,
-                    0.0,
-                    1.0,
-                ],
-            ),
-        ],
-    }))
-    .unwrap()
 }
 
 /// `live --port PTY --view --take T` (its view on `--view-listen`;

@@ -22,12 +22,19 @@
 //! source's, the view's address is `--view-listen` (`127.0.0.1:8765` by
 //! default: this machine only).
 //!
+//! **Ending it.** It runs until `--seconds` pass or Ctrl-C (SIGINT; SIGTERM
+//! and SIGHUP too): the first says so on stderr and ends the session the
+//! same way as `--seconds` (the board disarmed, the summary printed with
+//! `stopped`, the end check run, the take saved); a second quits at once
+//! with exit code 130 ([`crate::interrupt`], which also keeps the emulated
+//! board out of the terminal's Ctrl-C and ends it on that quit).
+//!
 //! **The recording.** Every tracker frame actually sent is appended to
-//! `out/live/live.csv` as it goes (flushed every 100 ms, so a session ended by
-//! Ctrl-C is kept up to then): `marionette sim --recording out/live/live.csv`
-//! replays it. On the emulated board `live` checks that itself at the end:
-//! the servo output against the core run on the recording (following the
-//! fail-safe trips the board reported). `Params` from OSC faders are sent
+//! `out/live/live.csv` as it goes (flushed every 100 ms, so a session that
+//! quits at once is kept up to then): `marionette sim --recording
+//! out/live/live.csv` replays it. On the emulated board `live` checks that
+//! itself at the end: the servo output against the core run on the
+//! recording (following the fail-safe trips the board reported). `Params` from OSC faders are sent
 //! but not part of the recording (a recording holds tracker samples only).
 
 use super::CmdError;
@@ -289,11 +296,12 @@ impl Senders {
     }
 }
 
-/// Runs `marionette live` until Ctrl-C or `--seconds`.
+/// Runs `marionette live` until Ctrl-C or `--seconds` (a second Ctrl-C
+/// quits at once: [`crate::interrupt`]).
 pub fn run(args: &Args) -> Result<(), CmdError> {
     let listener = Listener::bind(args.listen)?;
-    let stop = AtomicBool::new(false);
-    let (summary, _) = live(args, &listener, &stop)
+    let stop = crate::interrupt::stop_on_ctrl_c("live")?;
+    let (summary, _) = live(args, &listener, stop)
         .inspect_err(|e| crate::refusal::print_json_stop(&**e, args.json))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
@@ -404,6 +412,7 @@ pub fn live(
         seconds,
         sent_csv: recording.path.display().to_string(),
         disarm_acked,
+        stopped: stop.load(Ordering::Relaxed),
         ..stream::Summary::default()
     };
     stream::summarize(
@@ -488,10 +497,13 @@ fn listen_loop(
                     }
                 }
             }
+            // Interrupted: a signal (Ctrl-C sets `stop`) arrived during the read.
             Err(e)
                 if matches!(
                     e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::TimedOut
+                        | std::io::ErrorKind::Interrupted
                 ) => {}
             Err(e) => return Err(format!("reading udp: {e}").into()),
         }
@@ -551,6 +563,9 @@ fn check(
 
 fn print_summary(s: &Summary) {
     let c = &s.source;
+    if s.board.stopped {
+        println!("live: stopped by Ctrl-C after {:.1} s", s.board.seconds);
+    }
     println!(
         "live: {} packets from {} sender(s) ({} malformed, {} refused); {} messages used, {} not \
          mapped; silent {} time(s)",

@@ -20,6 +20,11 @@
 //! - with `--take T.take`, the session as a take (docs/take.md): every
 //!   message written, the replies, and the targets the telemetry reported.
 //!
+//! Ctrl-C (SIGINT; SIGTERM and SIGHUP too) stops offering frames and ends
+//! the session as at the recording's end (`Disarm`, the files, the take,
+//! the summary with `stopped`); a second quits at once with exit code 130
+//! ([`crate::interrupt`]).
+//!
 //! It prints frames sent and dropped, the link's use against its capacity,
 //! and what the board said about itself: its state, fail-safe trips, and
 //! frame timing (mean, worst, overruns of the frame period) in its counter
@@ -128,6 +133,9 @@ pub struct Summary {
     /// The board's flashed show, from its last `Status` (`null` if it sent
     /// none).
     pub show: Option<ShowReport>,
+    /// Whether Ctrl-C (or SIGTERM, SIGHUP) ended the session: `stream`
+    /// before the recording's end, `live` before `--seconds`.
+    pub stopped: bool,
 }
 
 /// Tallies the board's replies into `s` and writes the telemetry's servo
@@ -335,21 +343,55 @@ pub fn await_disarm(replies: &Replies, limit: Duration) -> bool {
 }
 
 /// Offers each frame at its recorded time (or, `fast`, as soon as the
-/// last one went); returns the seconds it took.
-fn schedule(sender: &Sender, frames: &[TrackerFrame], fast: bool, after: &dyn Fn(usize)) -> f64 {
+/// last one went) until `stop` is set; returns the frames offered and the
+/// seconds it took.
+fn schedule(
+    sender: &Sender,
+    frames: &[TrackerFrame],
+    (fast, stop): (bool, &AtomicBool),
+    after: &dyn Fn(usize),
+) -> (usize, f64) {
     let start = Instant::now();
     let first = frames.first().map_or(0, |f| f.time_us);
-    for (i, f) in frames.iter().enumerate() {
-        if fast {
-            sender.drain(Duration::from_secs(3600));
-        } else {
-            let due = Duration::from_micros(u64::from(f.time_us.wrapping_sub(first)));
-            std::thread::sleep(due.saturating_sub(start.elapsed()));
+    let mut offered = 0;
+    for f in frames {
+        let due = (!fast)
+            .then(|| start + Duration::from_micros(u64::from(f.time_us.wrapping_sub(first))));
+        if !wait_for(sender, due, stop) {
+            break;
         }
         sender.offer(*f);
-        after(i + 1);
+        offered += 1;
+        after(offered);
     }
-    start.elapsed().as_secs_f64()
+    (offered, start.elapsed().as_secs_f64())
+}
+
+/// Waits, in steps of at most 50 ms watching `stop`, until `due` or (none)
+/// until the sender has written what it was given (at most an hour, or
+/// until the port fails); false if `stop` was set.
+fn wait_for(sender: &Sender, due: Option<Instant>, stop: &AtomicBool) -> bool {
+    const STEP: Duration = Duration::from_millis(50);
+    let give_up = Instant::now() + Duration::from_secs(3600);
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return false;
+        }
+        match due {
+            Some(due) => {
+                let left = due.saturating_duration_since(Instant::now());
+                if left.is_zero() {
+                    return true;
+                }
+                std::thread::sleep(left.min(STEP));
+            }
+            None => {
+                if sender.drain(STEP) || sender.failed().is_some() || Instant::now() >= give_up {
+                    return true;
+                }
+            }
+        }
+    }
 }
 
 /// Saves the take of a session with a board on a port (`source` names the
@@ -396,10 +438,13 @@ pub fn write_sent(path: &Path, frames: &[TrackerFrame]) -> Result<(), CmdError> 
     Ok(())
 }
 
-/// Streams the recording to the board and reports what happened.
+/// Streams the recording to the board and reports what happened; Ctrl-C
+/// ends it early the same way (a second quits at once:
+/// [`crate::interrupt`]).
 pub fn run(args: &Args) -> Result<(), CmdError> {
+    let stop = crate::interrupt::stop_on_ctrl_c("stream")?;
     let (summary, _) =
-        stream(args).inspect_err(|e| crate::refusal::print_json_stop(&**e, args.json))?;
+        stream(args, stop).inspect_err(|e| crate::refusal::print_json_stop(&**e, args.json))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
@@ -408,9 +453,10 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     Ok(())
 }
 
-/// Streams the recording to the board; returns the summary and every
-/// message the board sent.
-pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
+/// Streams the recording to the board until its end or until `stop` is
+/// set (then the frames not yet offered are not sent; the session ends as
+/// at the end); returns the summary and every message the board sent.
+pub fn stream(args: &Args, stop: &AtomicBool) -> Result<(Summary, Vec<Message>), CmdError> {
     let rig = rigfile::load(&rigfile::resolve(&args.rig))?;
     let frames = perform::frames(&import::csv::read_tracker_csv(&args.recording)?)?;
     let port = serialport::new(&args.port, args.baud)
@@ -438,13 +484,14 @@ pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
             .file_name()
             .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
     );
-    let seconds = super::view::watched_board(&args.view, &rig_blob, &title, &frames, |hook| {
-        Ok(schedule(&sender, &frames, args.fast, &|offered| {
-            hook(offered, sender.counts().dropped, None, &|| {
-                replies.recent(4096)
-            });
-        }))
-    })?;
+    let (offered, seconds) =
+        super::view::watched_board(&args.view, &rig_blob, &title, &frames, |hook| {
+            Ok(schedule(&sender, &frames, (args.fast, stop), &|offered| {
+                hook(offered, sender.counts().dropped, None, &|| {
+                    replies.recent(4096)
+                });
+            }))
+        })?;
     sender.drain(Duration::from_secs(2));
     sender.command(CommandKind::Disarm);
     let failed = sender.failed();
@@ -469,6 +516,7 @@ pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
         seconds,
         sent_csv: sent_csv.display().to_string(),
         disarm_acked,
+        stopped: offered < frames.len(),
         ..Summary::default()
     };
     summarize(&messages, &mut summary, &args.out.join("telemetry.csv"))?;
@@ -476,6 +524,12 @@ pub fn stream(args: &Args) -> Result<(Summary, Vec<Message>), CmdError> {
 }
 
 fn print_summary(s: &Summary) {
+    if s.stopped {
+        println!(
+            "stream: stopped by Ctrl-C after {} of {} frames",
+            s.sender.offered, s.frames
+        );
+    }
     println!(
         "stream: {} of {} frames sent, {} dropped (newest wins) in {:.2} s; link {:.0} B/s of \
          {:.0} ({:.1} %)",

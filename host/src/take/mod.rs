@@ -404,7 +404,8 @@ impl Take {
     /// and reply times come from a native replay of the session that
     /// follows the fail-safe trips the board reported (the outputs are the
     /// board's own: only their times are the replay's, and an output past
-    /// the replay's end takes the period after the one before).
+    /// the replay's end takes the period after the one before; the times
+    /// never go back, so the take keeps the board's order).
     pub fn of_run(
         source: &str,
         region: &[u8],
@@ -433,14 +434,9 @@ impl Take {
         );
         let mut events = sent_events(session);
         let frames = run.frame_targets.len();
-        let mut last = session.last().map_or(0, |s| s.time_us);
-        for (k, targets) in outputs.iter().enumerate() {
-            let time_us = followed
-                .times
-                .get(k)
-                .copied()
-                .unwrap_or_else(|| last.wrapping_add(period_us));
-            last = time_us;
+        let end = session.last().map_or(0, |s| s.time_us);
+        let times = output_times(&followed.times, outputs.len(), end, period_us);
+        for (k, (targets, time_us)) in outputs.iter().zip(times).enumerate() {
             events.push(Event::output(time_us, k < frames, targets));
         }
         events.extend(reply_events(session, &run.replies)?);
@@ -745,9 +741,48 @@ fn sent_events(session: &[Sent]) -> Vec<Event> {
         .collect()
 }
 
+/// The times of `n` board outputs: the replay's (`replay`) where it has
+/// them, past its end a period after the one before (from `end`, the
+/// session's last message), and never going back. The replay runs a
+/// fail-safe trip's easing ticks late enough for the core's clock to see
+/// the time-out, after the time of the message that ended the trip, which
+/// the board received after them: such an output takes the time of the
+/// next one, so that sorting the take's events keeps the board's order.
+fn output_times(replay: &[u32], n: usize, end: u32, period_us: u32) -> Vec<u32> {
+    let mut last = end;
+    let mut times: Vec<u32> = (0..n)
+        .map(|k| {
+            last = replay
+                .get(k)
+                .copied()
+                .unwrap_or_else(|| last.wrapping_add(period_us));
+            last
+        })
+        .collect();
+    let mut next = u32::MAX;
+    for t in times.iter_mut().rev() {
+        *t = (*t).min(next);
+        next = *t;
+    }
+    times
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn output_times_follow_the_replay_and_never_go_back() {
+        // A trip's two easing outputs (5000, 6000) timed after the output
+        // of the message that ended it (2000): they take its time; past
+        // the replay's end, a period (1000) after the one before.
+        let replay = [0, 1000, 5000, 6000, 2000, 3000];
+        assert_eq!(
+            output_times(&replay, 8, 3000, 1000),
+            [0, 1000, 2000, 2000, 2000, 3000, 4000, 5000]
+        );
+        assert_eq!(output_times(&[], 2, 7000, 1000), [8000, 9000]);
+    }
 
     fn small() -> Take {
         Take {

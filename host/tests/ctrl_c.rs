@@ -1,0 +1,339 @@
+//! Ctrl-C ends `marionette live` cleanly: the real binary on the emulated
+//! board, driven by a VMC sender, is sent SIGINT the way a terminal sends
+//! it (to its whole process group, so the emulated board started by it
+//! gets it too unless `live` keeps it out). It must end as at `--seconds`:
+//! exit 0, the summary printed with the end check, the take saved and
+//! loadable, the recording written. A second Ctrl-C quits at once (exit
+//! code 130) and leaves no emulated board running. `stream` to a board on
+//! a serial port ends early the same way on Ctrl-C.
+
+#[path = "support/recording.rs"]
+mod recording;
+#[path = "support/vmc.rs"]
+mod vmc;
+
+use marionette_host::{perform, rigfile};
+use recording::repeated_recording;
+use std::io::{BufRead, BufReader, Read};
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::mpsc::Receiver;
+use std::time::{Duration, Instant};
+use vmc::vmc_hand;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// humanoid16's table whose every sample is the rest pose (the solver
+/// moves the figure to the goals), for the emulated board.
+fn rest_tables(dir: &Path) -> PathBuf {
+    let rig = rigfile::load(&repo().join("rigs/humanoid16.toml")).unwrap();
+    let axes = [
+        ("hand_x", -1.0, 2.0, 2),
+        ("hand_y", -1.0, 2.0, 2),
+        ("hand_z", -1.0, 2.0, 2),
+    ];
+    let path = dir.join("rest.bin");
+    std::fs::write(&path, perform::rest_grid(&rig, &axes).unwrap()).unwrap();
+    path
+}
+
+/// A real board's flash for the emulated board on a pty: humanoid16 and
+/// [`rest_tables`].
+fn board_region(dir: &Path) -> PathBuf {
+    let rig = rigfile::load(&repo().join("rigs/humanoid16.toml")).unwrap();
+    let table = std::fs::read(rest_tables(dir)).unwrap();
+    let mut blob = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
+    let n = rig.desc().to_blob(&mut blob).unwrap();
+    let region = dir.join("region.bin");
+    std::fs::write(&region, perform::region(&blob[..n], Some(&table))).unwrap();
+    region
+}
+
+/// `marionette live` on the emulated board (or `stream`), in a process
+/// group of its own (as a terminal's foreground job); its stdout lines come
+/// on the receiver, its stderr is read whole at the end.
+struct Live {
+    child: Child,
+    lines: Receiver<String>,
+    out: PathBuf,
+    take: PathBuf,
+}
+
+impl Live {
+    fn start(dir: &Path, extra: &[&str]) -> Self {
+        let tables = rest_tables(dir);
+        let out = dir.join("out");
+        let take = dir.join("live.take");
+        let args = ["--tables", s(&tables), "--take", s(&take), "--out", s(&out)];
+        let child = Self::spawn(&[&["live"], &args[..], &["--listen", "127.0.0.1:0"], extra]);
+        Self::with(child, out, take)
+    }
+
+    /// `marionette ARGS` (concatenated), its own process group's leader.
+    fn spawn(args: &[&[&str]]) -> Child {
+        Command::new(env!("CARGO_BIN_EXE_marionette"))
+            .args(args.concat())
+            .process_group(0)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("marionette runs")
+    }
+
+    fn with(mut child: Child, out: PathBuf, take: PathBuf) -> Self {
+        let stdout = child.stdout.take().unwrap();
+        let (tx, lines) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                println!("> {line}");
+                let _ = tx.send(line);
+            }
+        });
+        Self {
+            child,
+            lines,
+            out,
+            take,
+        }
+    }
+
+    /// Where it listens, once the board has armed (it says so then).
+    fn source(&self) -> std::net::SocketAddr {
+        loop {
+            let line = self
+                .lines
+                .recv_timeout(Duration::from_secs(120))
+                .expect("live says where it listens");
+            if let Some(at) = line.find("udp://") {
+                let addr = line[at + 6..].split_whitespace().next().unwrap();
+                return addr.parse().unwrap();
+            }
+        }
+    }
+
+    /// SIGINT to its whole process group, as a terminal's Ctrl-C.
+    fn ctrl_c(&self) {
+        let group = format!("-{}", self.child.id());
+        let status = Command::new("kill")
+            .args(["-INT", "--", &group])
+            .status()
+            .unwrap();
+        assert!(status.success(), "kill -INT {group}");
+    }
+
+    /// Waits for it to exit (killing its group after `limit`); its status,
+    /// the rest of its stdout and its stderr.
+    fn finish(mut self, limit: Duration) -> (ExitStatus, String, String) {
+        let deadline = Instant::now() + limit;
+        let status = loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                break status;
+            }
+            if Instant::now() > deadline {
+                let group = format!("-{}", self.child.id());
+                let _ = Command::new("kill").args(["-KILL", "--", &group]).status();
+                let _ = self.child.wait();
+                panic!("it did not end within {limit:?} of Ctrl-C");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        let mut stderr = String::new();
+        self.child
+            .stderr
+            .take()
+            .unwrap()
+            .read_to_string(&mut stderr)
+            .unwrap();
+        eprintln!("stderr: {stderr}");
+        let stdout: Vec<String> =
+            std::iter::from_fn(|| self.lines.recv_timeout(Duration::from_secs(5)).ok()).collect();
+        (status, stdout.join("\n"), stderr)
+    }
+}
+
+/// The ids of the processes whose command line names `path` (the
+/// emulated board, which reads `out/region.bin`).
+fn processes_naming(path: &Path) -> Vec<String> {
+    let needle = path.to_string_lossy().into_owned();
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|e| {
+            let e = e.ok()?;
+            let cmdline = std::fs::read(e.path().join("cmdline")).ok()?;
+            String::from_utf8_lossy(&cmdline)
+                .replace('\0', " ")
+                .contains(&needle)
+                .then(|| e.file_name().to_string_lossy().into_owned())
+        })
+        .collect()
+}
+
+#[test]
+fn ctrl_c_ends_a_live_take_as_seconds_would() {
+    let dir = tempfile::tempdir().unwrap();
+    let live = Live::start(dir.path(), &[]);
+    let to = live.source();
+    let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let start = Instant::now();
+    for i in 0..300u32 {
+        let due = Duration::from_millis(5 * u64::from(i));
+        std::thread::sleep(due.saturating_sub(start.elapsed()));
+        socket.send_to(&vmc_hand(f64::from(i) / 300.0), to).unwrap();
+    }
+    // The newest frames reach the board and the recording (100 ms flushes).
+    std::thread::sleep(Duration::from_millis(300));
+    live.ctrl_c();
+    let (take_path, csv) = (live.take.clone(), live.out.join("live.csv"));
+    let (status, stdout, stderr) = live.finish(Duration::from_secs(120));
+
+    assert!(status.success(), "live ends cleanly on Ctrl-C: {status}");
+    assert!(
+        stderr.contains("live: stopping (Ctrl-C again to quit now)"),
+        "{stderr}"
+    );
+    assert!(
+        stdout.contains("live: stopped by Ctrl-C after "),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("live: 300 packets from 1 sender(s)"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("no Ack of Disarm"), "disarmed: {stdout}");
+    // The end check ran and the board's servo output equals the core's.
+    let check = stdout
+        .lines()
+        .find(|l| l.starts_with("emulated board: "))
+        .unwrap_or_else(|| panic!("the end check's line: {stdout}"));
+    let compared: usize = check["emulated board: ".len()..]
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(compared > 0 && check.contains(": 0 differ"), "{check}");
+    assert!(stdout.contains(&format!("recording: {}", csv.display())));
+
+    // The recording and the take: the same frames, the board's outputs.
+    let recorded = marionette_host::import::csv::read_tracker_csv(&csv).unwrap();
+    let frames = perform::frames(&recorded).unwrap();
+    assert!(frames.len() >= 10, "{} frames recorded", frames.len());
+    let take = marionette_host::take::Take::load(&take_path).expect("the take loads");
+    assert_eq!(take.source, "live");
+    let info = take.info();
+    assert_eq!(info.sent.tracker_frames, frames.len());
+    assert!(info.servo_link_seen, "{info:?}");
+    assert_eq!(info.frame_outputs, frames.len(), "{info:?}");
+    assert!(processes_naming(&dir.path().join("out/region.bin")).is_empty());
+}
+
+/// A session slow on its way out (its view kept up 60 s after the
+/// performance, the board still running) quits at the second Ctrl-C, and
+/// ends the board it started.
+#[cfg(feature = "view")]
+#[test]
+fn a_second_ctrl_c_quits_at_once_and_leaves_no_board_running() {
+    let dir = tempfile::tempdir().unwrap();
+    let view = ["--view", "--view-listen", "127.0.0.1:0"];
+    let live = Live::start(dir.path(), &[&view[..], &["--view-linger", "60"]].concat());
+    let _ = live.source();
+    let region = dir.path().join("out/region.bin");
+    let board = processes_naming(&region);
+    assert_eq!(board.len(), 1, "the emulated board runs: {board:?}");
+    live.ctrl_c();
+    std::thread::sleep(Duration::from_millis(1500));
+    assert_eq!(processes_naming(&region), board, "still running");
+    live.ctrl_c();
+    let (status, stdout, stderr) = live.finish(Duration::from_secs(10));
+    assert_eq!(status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("live: stopping"), "{stderr}");
+    assert!(stderr.contains("live: quitting now"), "{stderr}");
+    assert!(
+        !stdout.contains("stopped by Ctrl-C"),
+        "no summary: {stdout}"
+    );
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while !processes_naming(&region).is_empty() {
+        assert!(
+            Instant::now() < deadline,
+            "left running: {:?}",
+            processes_naming(&region)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// `stream` of a 21 s recording to the emulated board on a pty (a board on
+/// a serial port), Ctrl-C once the servos move: it disarms the board,
+/// prints its summary, saves the take and the frames sent.
+#[test]
+fn ctrl_c_ends_a_stream_early_and_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let region = board_region(dir.path());
+    let servo = dir.path().join("uart1.bin");
+    let elf = marionette_host::qemu::firmware_elf("perform").unwrap();
+    let mut board = marionette_host::qemu::PtyBoard::start(&elf, &region, &servo).unwrap();
+    let (recording, per_copy) = repeated_recording(dir.path(), 10);
+    let frames = per_copy * 10;
+    let (out, take) = (dir.path().join("out"), dir.path().join("stream.take"));
+    let child = Live::spawn(&[&[
+        "stream",
+        "--port",
+        s(board.pty()),
+        "--baud",
+        "200000",
+        "--recording",
+        s(&recording),
+        "--out",
+        s(&out),
+        "--take",
+        s(&take),
+    ]]);
+    let stream = Live::with(child, out.clone(), take.clone());
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while std::fs::metadata(&servo).map_or(0, |m| m.len()) < 4096 {
+        assert!(Instant::now() < deadline, "the board never moved");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    stream.ctrl_c();
+    let (status, stdout, stderr) = stream.finish(Duration::from_secs(120));
+    assert!(status.success(), "stream ends cleanly on Ctrl-C: {status}");
+    assert!(
+        stderr.contains("stream: stopping (Ctrl-C again to quit now)"),
+        "{stderr}"
+    );
+    let stopped = stdout
+        .lines()
+        .find(|l| l.starts_with("stream: stopped by Ctrl-C after "))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    let offered: usize = stopped["stream: stopped by Ctrl-C after ".len()..]
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(
+        offered > 0 && offered < frames,
+        "{stopped} ({frames} frames)"
+    );
+    assert!(
+        stopped.ends_with(&format!(" of {frames} frames")),
+        "{stopped}"
+    );
+    assert!(!stdout.contains("no Ack of Disarm"), "disarmed: {stdout}");
+    assert_eq!(board.wait(Duration::from_secs(30)).unwrap(), Some(0));
+    let sent = marionette_host::import::csv::read_tracker_csv(&out.join("sent.csv")).unwrap();
+    let sent = perform::frames(&sent).unwrap();
+    assert!(!sent.is_empty() && sent.len() <= offered);
+    let take = marionette_host::take::Take::load(&take).expect("the take loads");
+    assert_eq!(take.source, "stream");
+    assert_eq!(take.info().sent.tracker_frames, sent.len());
+}
