@@ -5,7 +5,9 @@
 //! first signal sets the stop flag it returns and says on stderr that the
 //! command is stopping: the session then ends as it does at `--seconds` or
 //! at the end of its recording (the board disarmed, the summary printed,
-//! the end check run, the take saved). A second signal quits at once with
+//! the end check run, the take saved). Before the board has armed (while
+//! the command still says `Hello`), it ends the command with an error
+//! instead, and the board is never armed. A second signal quits at once with
 //! exit code 130, for a session that hangs on its way out.
 //!
 //! A terminal's Ctrl-C goes to every process of its foreground process

@@ -5,7 +5,8 @@
 //! exit 0, the summary printed with the end check, the take saved and
 //! loadable, the recording written. A second Ctrl-C quits at once (exit
 //! code 130) and leaves no emulated board running. `stream` to a board on
-//! a serial port ends early the same way on Ctrl-C.
+//! a serial port ends early the same way on Ctrl-C, and a Ctrl-C before the
+//! board answers ends it without arming the board.
 
 #[path = "support/recording.rs"]
 mod recording;
@@ -15,6 +16,7 @@ mod vmc;
 use marionette_host::{perform, rigfile};
 use recording::repeated_recording;
 use std::io::{BufRead, BufReader, Read};
+use std::os::fd::AsRawFd;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -336,4 +338,64 @@ fn ctrl_c_ends_a_stream_early_and_cleanly() {
     let take = marionette_host::take::Take::load(&take).expect("the take loads");
     assert_eq!(take.source, "stream");
     assert_eq!(take.info().sent.tracker_frames, sent.len());
+}
+
+#[test]
+fn ctrl_c_before_the_board_answers_never_arms_it() {
+    // A pty with nothing behind it: `stream` says Hello once a second and
+    // waits up to 5 s for an answer. Ctrl-C after its first Hello ends it
+    // then, with its own error (not the no-answer fault at 5 s), and it
+    // has written nothing but Hello.
+    let dir = tempfile::tempdir().unwrap();
+    let pty = nix::pty::openpty(None, None).unwrap();
+    let slave = std::fs::read_link(format!("/proc/self/fd/{}", pty.slave.as_raw_fd())).unwrap();
+    let (tx, written) = std::sync::mpsc::channel::<Vec<u8>>();
+    let mut master = std::fs::File::from(pty.master);
+    std::thread::spawn(move || {
+        let mut buf = [0u8; 4096];
+        while let Ok(n @ 1..) = master.read(&mut buf) {
+            if tx.send(buf[..n].to_vec()).is_err() {
+                break;
+            }
+        }
+    });
+    let (recording, _) = repeated_recording(dir.path(), 1);
+    let (out, take) = (dir.path().join("out"), dir.path().join("stream.take"));
+    let child = Live::spawn(&[&[
+        "stream",
+        "--port",
+        s(&slave),
+        "--recording",
+        s(&recording),
+        "--out",
+        s(&out),
+    ]]);
+    let stream = Live::with(child, out, take);
+    let mut bytes = Vec::new();
+    while !bytes.contains(&0) || bytes.last() != Some(&0) || bytes.len() < 2 {
+        let chunk = written
+            .recv_timeout(Duration::from_secs(120))
+            .expect("stream says Hello");
+        bytes.extend(chunk);
+    }
+    stream.ctrl_c();
+    let (status, _, stderr) = stream.finish(Duration::from_secs(60));
+    assert_eq!(status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("stopped by Ctrl-C before the board armed"),
+        "{stderr}"
+    );
+    bytes.extend(written.try_iter().flatten());
+    let mut said = Vec::new();
+    for frame in bytes.split(|&b| b == 0).filter(|f| !f.is_empty()) {
+        let mut buf = [0u8; 512];
+        let n = marionette_core::wire::cobs::decode(frame, &mut buf).unwrap();
+        said.push(marionette_core::wire::decode_frame(&buf[..n]).unwrap());
+    }
+    assert!(!said.is_empty());
+    assert!(
+        said.iter()
+            .all(|m| matches!(m, marionette_core::wire::Message::Hello(_))),
+        "{said:?}"
+    );
 }

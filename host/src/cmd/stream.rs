@@ -253,15 +253,20 @@ impl Replies {
 }
 
 /// Says `Hello` until the board answers with a `Status` (once a second, up
-/// to `limit`); errors if it never does or cannot arm.
+/// to `limit`); errors if it never does or cannot arm, or if `stop` is set
+/// first (a Ctrl-C while waiting acts within a second and the board is
+/// never armed).
 pub fn handshake(
     sender: &Sender,
     replies: &Replies,
-    port: &str,
-    limit: Duration,
+    (port, limit): (&str, Duration),
+    stop: &AtomicBool,
 ) -> Result<(), CmdError> {
     let deadline = Instant::now() + limit;
     let status = loop {
+        if stop.load(Ordering::Relaxed) {
+            return Err(stopped_before_arming(port));
+        }
         sender.hello();
         let got = replies.wait_for(Duration::from_secs(1), |m| match m {
             Message::Status(st) if st.request_seq.is_none() => Some(*st),
@@ -280,6 +285,9 @@ pub fn handshake(
             )));
         }
     };
+    if stop.load(Ordering::Relaxed) {
+        return Err(stopped_before_arming(port));
+    }
     if status.reason != StatusReason::Ok || !status.table_ok {
         let reason = if status.reason == StatusReason::Ok {
             StatusReason::NoTable
@@ -294,6 +302,12 @@ pub fn handshake(
         )));
     }
     Ok(())
+}
+
+/// Ctrl-C before the board armed: the command ends without arming it
+/// (nothing but `Hello` was sent).
+fn stopped_before_arming(port: &str) -> CmdError {
+    format!("{port}: stopped by Ctrl-C before the board armed (it was sent only Hello)").into()
 }
 
 /// Arms the board; a refusal is a [`Stop`] with the board's `Status`
@@ -469,7 +483,12 @@ pub fn stream(args: &Args, stop: &AtomicBool) -> Result<(Summary, Vec<Message>),
     let replies = Replies::spawn(reader);
     let link = Link::Uart { baud: args.baud };
     let sender = Sender::spawn(port, link, args.frame);
-    handshake(&sender, &replies, &args.port, Duration::from_secs(5))?;
+    handshake(
+        &sender,
+        &replies,
+        (&args.port, Duration::from_secs(5)),
+        stop,
+    )?;
     arm(&sender, &replies, &args.port)?;
     let mut rig_blob = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
     let n = rig
