@@ -1351,3 +1351,64 @@ fn carried_state_matches_fresh_solves() {
     }
     assert_eq!(frames, 23);
 }
+
+/// A tracking loop at 1 kHz fed its own solutions: hands and feet circling
+/// at 1.5 m/s (1.5 mm per frame). With chord steps ([`Solver::chord`]) the
+/// goals are met within the tolerance (by the `f64` reference forward
+/// kinematics) on every frame the plain solver meets them, within the
+/// limits, for less counted work.
+#[test]
+fn chord_steps_track_at_1_khz() {
+    use cmu::index::*;
+    let body = &cmu::BODY;
+    let mut rng = Rng(0xC40D);
+    let root = Vec3::new(0.0, 0.95, 0.0);
+    let plain = Solver::DEFAULT;
+    let chord = Solver::DEFAULT.with_chord(4);
+    let (mut work, mut chorded, mut frames) = ([0u64; 2], 0, 0);
+    for problem in 0..6 {
+        let truth = random_pose(body, &mut rng, root);
+        let segs = [LEFT_HAND, RIGHT_HAND, LEFT_FOOT, RIGHT_FOOT];
+        let base: Vec<V> = segs.iter().map(|&s| ref_touch(body, &truth, s)).collect();
+        let phase: Vec<f64> = segs.iter().map(|_| rng.uniform(0.0, 6.3)).collect();
+        let start = perturb(body, &mut rng, &truth, 0.05);
+        let mut angles = [start, start];
+        let mut states = [SolverState::<64>::new(), SolverState::<64>::new()];
+        let mut pose = Pose::<64>::default();
+        for frame in 0..300 {
+            // Radius 5 cm at 30 rad/s: 1.5 m/s.
+            let t = f64::from(frame) / 1000.0;
+            let mut goals = GoalSet::<4>::new();
+            for ((&seg, b), &ph) in segs.iter().zip(&base).zip(&phase) {
+                let a = 30.0 * t + ph;
+                let p = [b[0] + 0.05 * a.cos(), b[1] + 0.05 * a.sin(), b[2]];
+                goals.push(Goal::reach(seg, vf(p), 1.0)).unwrap();
+            }
+            let mut met = [false; 2];
+            for (k, s) in [plain, chord].iter().enumerate() {
+                let r =
+                    solve_with(s, body, &goals, &mut angles[k], &mut pose, &mut states[k]).unwrap();
+                work[k] += u64::from(r.work);
+                met[k] = ref_residuals(body, &goals, &angles[k])
+                    .iter()
+                    .all(|&d| d <= 1.0001e-4);
+                assert_within_limits(body, &angles[k], "chord");
+                if k == 1 && r.iterations == 1 && frame > 0 {
+                    chorded += 1;
+                }
+            }
+            if frame > 0 {
+                frames += 1;
+                assert!(met[1] || !met[0], "problem {problem}, frame {frame}");
+            }
+        }
+    }
+    println!(
+        "1 kHz tracking, {frames} frames: work {} plain, {} with chord steps ({chorded} frames of one iteration)",
+        work[0], work[1]
+    );
+    // The cost model's count (an upper bound of the instructions; the
+    // emulated board's counts are `solve.cmu4.warm1k.*` in `marionette
+    // icount`).
+    assert!(work[1] * 10 < work[0] * 9, "{work:?}");
+}
