@@ -273,38 +273,23 @@ fn solve_rows(counter: &mut Counter) {
         report(cold_name, cold_base, 1, cold);
         report(warm_name, warm_base, 1, warm);
         if method == Method::TreeDls {
-            let mut frame = (&mut angles, &mut state, &mut rng);
-            let at1k = warm1k_row(counter, (WARM1K, &solver), &moved, &mut frame);
-            let chord = solver.with_chord(CHORD_SOLVES);
-            warm1k_row(counter, (WARM1K_CHORD, &chord), &at1k, &mut frame);
+            warm1k_row(counter, &solver, &moved, &mut angles, &mut state, &mut rng);
         }
     }
 }
 
 /// The next frame of the live loop at its real rate: at 1 kHz a hand moving
-/// at 2 m/s moves at most 2 mm per frame.
-const WARM1K: &str = "solve.cmu4.warm1k.treedls";
-/// The frame after [`WARM1K`], with chord steps ([`Solver::chord`]): the
-/// factor of its step serves this one.
-const WARM1K_CHORD: &str = "solve.cmu4.warm1k.chord";
-/// [`Solver::chord`] of the [`WARM1K_CHORD`] row (as `tests/solve.rs`
-/// tracks with).
-const CHORD_SOLVES: u8 = 4;
-
-/// The row `name`: the goals move by up to 1.15 mm per axis (≤ 2 mm) from
-/// `previous` (the last row's), solved from its solution with its state.
-/// Prints `met <row> <goals met within the tolerance> <goals>` after the
-/// row; returns the goals.
+/// at 2 m/s moves at most 2 mm per frame. The goals move by up to 1.15 mm
+/// per axis (≤ 2 mm) from the warm row's solution, solved with its state.
+/// Prints `met <row> <goals met within the tolerance> <goals>` after the row.
 fn warm1k_row(
     counter: &mut Counter,
-    (name, solver): (&str, &Solver),
+    solver: &Solver,
     previous: &GoalSet<4>,
-    (angles, state, rng): &mut (
-        &mut Angles<SEGMENTS>,
-        &mut SolverState<SEGMENTS>,
-        &mut Lcg,
-    ),
-) -> GoalSet<4> {
+    angles: &mut Angles<SEGMENTS>,
+    state: &mut SolverState<SEGMENTS>,
+    rng: &mut Lcg,
+) {
     let body = cmu::BODY;
     let mut pose = Pose::<SEGMENTS>::default();
     let mut moved = *previous;
@@ -317,7 +302,8 @@ fn warm1k_row(
     let ticks = counter.ticks(|| {
         result = solve::solve_with(solver, &body, &moved, angles, &mut pose, state).ok();
     });
-    report(name, "-", 1, ticks);
+    const NAME: &str = "solve.cmu4.warm1k.treedls";
+    report(NAME, "-", 1, ticks);
     let met = result.map_or(0, |r| {
         r.residuals
             .iter()
@@ -326,13 +312,12 @@ fn warm1k_row(
     });
     Line::new()
         .str("met ")
-        .str(name)
+        .str(NAME)
         .str(" ")
         .u32(met as u32)
         .str(" ")
         .u32(moved.as_slice().len() as u32)
         .print();
-    moved
 }
 
 /// Tracker frames in the per-frame rows (the first, cold one is not counted).

@@ -149,16 +149,6 @@ pub struct Solver {
     /// the solve's fixed part is refused ([`SolveError::Budget`]), so a
     /// solve's work never exceeds it. `u32::MAX`: no limit.
     pub budget: u32,
-    /// [`Method::TreeDls`] with a kept [`SolverState`], for a solve that
-    /// starts where the last one ended (a tracking loop fed its own
-    /// solutions): how many solves the last step's linearisation and
-    /// factorisation may serve again. Such a solve first tries a *chord
-    /// step* — the step for its new residuals through the kept factor, no
-    /// new columns, blocks or factorisation — if the same goals are unmet;
-    /// it is kept only if it lowers the error, and any further iteration
-    /// linearises afresh. 0: every iteration linearises (a live loop that
-    /// starts each frame from a new synthesized pose).
-    pub chord: u8,
 }
 
 impl Solver {
@@ -173,7 +163,6 @@ impl Solver {
         extrapolate: true,
         restarts: 0,
         budget: u32::MAX,
-        chord: 0,
     };
 
     /// The default: whole-tree damped least squares, root fixed, goals met to
@@ -189,7 +178,6 @@ impl Solver {
         extrapolate: false,
         restarts: 0,
         budget: u32::MAX,
-        chord: 0,
     };
 
     /// The same configuration with another method.
@@ -224,14 +212,6 @@ impl Solver {
     #[must_use]
     pub const fn with_budget(mut self, budget: u32) -> Self {
         self.budget = budget;
-        self
-    }
-
-    /// The same configuration with chord steps for `solves` solves after
-    /// each linearisation ([`Solver::chord`]).
-    #[must_use]
-    pub const fn with_chord(mut self, solves: u8) -> Self {
-        self.chord = solves;
         self
     }
 }

@@ -152,7 +152,6 @@ impl Slots {
     /// The scaled residuals of the awake goals (zero for the others) in the
     /// first [`Slots::count`] entries of `out` (the others are left as they
     /// are).
-    #[inline(always)]
     pub fn rhs(&self, out: &mut Rhs) {
         for (o, slot) in out.iter_mut().zip(self.iter()) {
             *o = if slot.awake {
@@ -173,7 +172,6 @@ impl Slots {
     /// After an accepted step: marks the goals whose residual the step did
     /// not halve, keeps the residuals for the next step and returns the
     /// largest change of any goal's residual (unscaled, squared).
-    #[inline(always)]
     pub fn accept(&mut self) -> f32 {
         let mut moved = 0.0;
         for slot in self.s.iter_mut().take(self.count) {

@@ -82,12 +82,6 @@ pub(super) struct System {
     /// blocks and its block products when every goal is awake and every
     /// group live ([`System::forget`]).
     pub most: (usize, usize),
-    /// The factor for chord steps ([`Solver::chord`](super::Solver::chord)):
-    /// whether the last step's is kept, the solves it has served since, and
-    /// the unmet goals it was linearised for. All zero bits when none is
-    /// kept, as the rest of a new state (cleared, not copied from a
-    /// constant).
-    pub kept: (bool, u8, u16),
 }
 
 /// Per block row, the blocks that may be nonzero.
@@ -110,7 +104,6 @@ impl System {
         awake: 0,
         work: (0, 0, false),
         most: (0, 0),
-        kept: (false, 0, 0),
     };
 
     /// Forgets the coupling: the joint layout changed. Finds the most work
@@ -184,41 +177,6 @@ impl System {
                 if awake >> j & 1 != 0 {
                     *rj = slot.r * slot.sw;
                 }
-            }
-        }
-        true
-    }
-
-    /// Whether the kept factor was made for these awake goals (and, with
-    /// the same unmet goals, the same live groups): a chord step may use it.
-    pub fn kept_for(&self, awake: u16) -> bool {
-        self.awake == awake
-    }
-
-    /// A chord step ([`Solver::chord`](super::Solver::chord)): each live
-    /// DOF's step `D⁻¹·J̃ᵀ·y` for the residuals in `slots` (scaled into `r`),
-    /// with `y` from the factor, columns, damping and held DOFs of the last
-    /// [`System::step`]; false if the factor cannot be used. The limits are
-    /// left to [`Joints::apply`], which clamps into them.
-    pub fn chord<const N: usize>(
-        &mut self,
-        joints: &mut Joints<N>,
-        slots: &Slots,
-        r: &mut Rhs,
-    ) -> bool {
-        slots.rhs(r);
-        let n = slots.count.min(MAX_GOALS);
-        if !forward(&self.l, &self.coupled, n, r, &mut self.y)
-            || !substitute(&self.l, &self.coupled, n, &mut self.y)
-        {
-            return false;
-        }
-        // No round of assembly: one pass's substitutions and pulls.
-        self.work = (0, 1, false);
-        let (groups, dofs, links) = joints.parts();
-        for (g, d) in groups.iter().zip(dofs) {
-            if g.live {
-                d.delta = pull(links_of(links, g), self.awake, &self.y) * d.inv_d;
             }
         }
         true
@@ -470,7 +428,10 @@ fn spread<const N: usize>(
             continue;
         }
         let links = links_of(links, g);
-        let cy = pull(links, awake, y);
+        let mut cy = Vec3::ZERO;
+        for l in links.iter().filter(|l| awake >> l.slot & 1 != 0) {
+            cy += l.cols.transpose() * y.get(usize::from(l.slot)).copied().unwrap_or(Vec3::ZERO);
+        }
         let step = cy * d.inv_d;
         let free = |id: f32, step: f32, old: f32| if id == 0.0 { old } else { step };
         d.delta = Vec3::new(
@@ -527,17 +488,6 @@ fn spread<const N: usize>(
         clamped = true;
     }
     clamped
-}
-
-/// `J̃ᵀ·y` of a group's DOFs: the pull of the awake slots' `y` through its
-/// links' columns.
-#[inline(always)]
-fn pull(links: &[Link], awake: u16, y: &Rhs) -> Vec3 {
-    let mut cy = Vec3::ZERO;
-    for l in links.iter().filter(|l| awake >> l.slot & 1 != 0) {
-        cy += l.cols.transpose() * y.get(usize::from(l.slot)).copied().unwrap_or(Vec3::ZERO);
-    }
-    cy
 }
 
 /// Marks the blocks that a group moving the slots `moves` makes nonzero
@@ -724,38 +674,8 @@ fn factor(a: &[Mat3], l: &mut [Mat3], coupled: &Coupling, n: usize, b: &Rhs, y: 
     true
 }
 
-/// Solves `L·z = b` into `y` for the first `n` entries with a kept factor
-/// `l` ([`factor`], which does the same row by row as it factors).
-fn forward(l: &[Mat3], coupled: &Coupling, n: usize, b: &Rhs, y: &mut Rhs) -> bool {
-    for s in 0..n {
-        let (Some(row), Some(&cs), Some(&bs), Some((head, z))) = (
-            l.get(at(s, 0)..=at(s, s)),
-            coupled.get(s),
-            b.get(s),
-            y.split_at_mut_checked(s),
-        ) else {
-            return false;
-        };
-        let mut v = bs;
-        let mut bits = cs & ((1u16 << s) - 1);
-        while bits != 0 {
-            let k = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            if let (Some(lk), Some(zk)) = (row.get(k), head.get(k)) {
-                v -= *lk * *zk;
-            }
-        }
-        let (Some(inv), Some(zs)) = (row.last(), z.first_mut()) else {
-            return false;
-        };
-        *zs = *inv * v;
-    }
-    true
-}
-
 /// Solves `Lᵀ·y = z` in place for the first `n` entries, with the factor `l`
 /// and the `z` of [`factor`].
-#[inline(always)]
 fn substitute(l: &[Mat3], coupled: &Coupling, n: usize, y: &mut Rhs) -> bool {
     let Some(mut rows) = l.get(..at(n, 0)) else {
         return false;

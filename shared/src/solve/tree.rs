@@ -31,16 +31,6 @@
 //! solve moves only the arms and the spine. Forward kinematics then places
 //! only the segments whose angles, or an ancestor's, changed.
 //!
-//! Chord steps ([`Solver::chord`]): a solve that starts where the last one
-//! ended, on goals that moved a little (a tracking loop at its frame rate),
-//! may first take the step for its new residuals through the factor, the
-//! columns and the damping the last step left in the state, with no new
-//! linearisation. The kept factor serves at most `chord` solves and only
-//! the same unmet (and so the same live) goals; the step is kept only if it
-//! lowers the error, and any further iteration linearises afresh.
-//! `tests/solve.rs` tracks hands and feet moving 1.5 mm per frame with it
-//! against the `f64` reference.
-//!
 //! The problem is not convex: joint limits and folding limbs leave other
 //! minima. With [`Solver::restarts`], when the goals are not all met, the
 //! solve is repeated from the rest pose and from poses spread over the moving
@@ -159,7 +149,6 @@ pub(super) fn solve<const N: usize>(
     lm.slots.init(work.goals, wmax)?;
     meter.add(Term::Slot, lm.slots.count);
     if !laid_out {
-        lm.system.kept.0 = false;
         lm.joints.init(solver, work, &lm.slots);
         lm.system.forget(&lm.joints, lm.slots.count);
         meter.add_tally(&layout_work(segments, lm.joints.sizes.climbs));
@@ -302,7 +291,6 @@ impl<const N: usize> Lm<N> {
     /// one-sided plane may wake) and its factorisation passes per round (up
     /// to [`CLAMP_PASSES`]), with its trials, finding the coupling and a
     /// rejection reserved; `None` if not even one pass fits.
-    #[inline(always)]
     fn plan(&self, solver: &Solver, fresh: bool, left: u32) -> Option<(usize, usize)> {
         let p = &self.prices;
         let trials = if solver.extrapolate { 3 } else { 1 };
@@ -365,12 +353,7 @@ impl<const N: usize> Lm<N> {
         let tol2 = solver.tolerance * solver.tolerance;
         let mut lambda = math::max(MIN_DAMPING, solver.damping);
         let mut fresh = true;
-        // A chord step first, if a factor is kept.
-        let mut iterations = if self.system.kept.0 && solver.chord > 0 {
-            self.chord_first(solver, work, meter)?
-        } else {
-            0
-        };
+        let mut iterations = 0u32;
         while iterations < u32::from(solver.max_iterations) {
             if self.slots.worst <= tol2 || self.joints.count == 0 {
                 return Ok((iterations, true));
@@ -398,8 +381,6 @@ impl<const N: usize> Lm<N> {
                 plan,
             );
             if !stepped {
-                // The factor is spoilt: none kept for chord steps.
-                self.system.kept.0 = false;
                 meter.add_tally(&self.iteration_work(linearised, self.system.work, 0, false));
                 lambda *= 4.0;
                 continue;
@@ -408,8 +389,6 @@ impl<const N: usize> Lm<N> {
             let trials = self.trial(solver, work)?;
             let accepted = self.slots.error < error;
             meter.add_tally(&self.iteration_work(linearised, self.system.work, trials, !accepted));
-            // This step's factor may serve the next solves' chord steps.
-            self.system.kept = (accepted, 0, self.joints.unmet());
             if accepted {
                 let moved = self.slots.accept();
                 fresh = true;
@@ -431,64 +410,8 @@ impl<const N: usize> Lm<N> {
         Ok((iterations, self.slots.worst <= tol2))
     }
 
-    /// The first iteration of [`Lm::run`] as a chord step
-    /// ([`Solver::chord`]) if the kept factor may serve another solve, some
-    /// goal is unmet, the factor was made for the goals now unmet and awake,
-    /// and the work allows an iteration without a new linearisation;
-    /// returns the iterations made (0 or 1). The step is kept if it lowers
-    /// the error; either way the next iteration linearises afresh. Out of
-    /// line: the plain iterations keep their code as it was.
-    #[inline(never)]
-    fn chord_first(
-        &mut self,
-        solver: &Solver,
-        work: &mut Work<'_, '_, N>,
-        meter: &mut Meter,
-    ) -> Result<u32, SolveError> {
-        let tol2 = solver.tolerance * solver.tolerance;
-        if self.system.kept.1 >= solver.chord
-            || solver.max_iterations == 0
-            || self.slots.worst <= tol2
-            || self.joints.count == 0
-        {
-            return Ok(0);
-        }
-        self.joints.settle(&self.slots, tol2);
-        self.price();
-        let awake = self.slots.awake() & self.joints.reach;
-        if self.joints.unmet() != self.system.kept.2
-            || !self.system.kept_for(awake)
-            || self.plan(solver, false, meter.left()).is_none()
-        {
-            return Ok(0);
-        }
-        self.system.kept.1 = self.system.kept.1.saturating_add(1);
-        if !self
-            .system
-            .chord(&mut self.joints, &self.slots, &mut self.rhs)
-        {
-            self.system.kept.0 = false;
-            meter.add_tally(&self.iteration_work(false, self.system.work, 0, false));
-            return Ok(1);
-        }
-        let error = self.slots.error;
-        let trials = self.trial(solver, work)?;
-        let accepted = self.slots.error < error;
-        meter.add_tally(&self.iteration_work(false, self.system.work, trials, !accepted));
-        if accepted {
-            self.slots.accept();
-        } else {
-            self.system.kept.0 = false;
-            self.joints.back(work);
-            self.refresh(work)?;
-            self.slots.keep();
-        }
-        Ok(1)
-    }
-
     /// Applies the step (and, if it helped but little, once more) and
     /// evaluates the goals; returns the forward kinematics made.
-    #[inline(always)]
     fn trial(&mut self, solver: &Solver, work: &mut Work<'_, '_, N>) -> Result<usize, SolveError> {
         let error = self.slots.error;
         self.joints.apply(work, MAX_STEP, true);
@@ -518,8 +441,6 @@ impl<const N: usize> Lm<N> {
         work: &mut Work<'_, '_, N>,
         meter: &mut Meter,
     ) -> Result<(u32, bool), SolveError> {
-        // The restarts start elsewhere: no chord step from the kept factor.
-        self.system.kept.0 = false;
         let (mut best, mut best_error) = (self.joints.save(work), self.slots.error);
         let start = best;
         let (mut iterations, mut converged) = (0u32, true);
