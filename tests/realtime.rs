@@ -321,6 +321,20 @@ fn the_warm_solve_at_1_khz_meets_every_goal_on_the_emulated_board() {
         "solve.cmu4.warm1k.treedls: {:.0} instructions",
         row.instructions
     );
+    // And `met <row> <frames with every goal met> <frames>` after the
+    // tracking rows: every goal on every frame, plain and predicted.
+    for name in ["solve.cmu4.track1k.treedls", "solve.cmu4.track1k.predict"] {
+        let met: Vec<&str> = console
+            .lines()
+            .find(|l| l.starts_with(&format!("met {name} ")))
+            .unwrap_or_else(|| panic!("no met line for {name}: {console}"))
+            .split_whitespace()
+            .skip(2)
+            .collect();
+        assert_eq!(met, ["40", "40"], "{name}");
+        let row = rows.iter().find(|r| r.name == name).unwrap();
+        println!("{name}: {:.0} instructions per frame", row.instructions);
+    }
 }
 
 /// Budgets around what a 1 kHz `humanoid16` frame leaves the solver: how

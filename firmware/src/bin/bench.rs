@@ -273,7 +273,10 @@ fn solve_rows(counter: &mut Counter) {
         report(cold_name, cold_base, 1, cold);
         report(warm_name, warm_base, 1, warm);
         if method == Method::TreeDls {
-            warm1k_row(counter, &solver, &moved, &mut angles, &mut state, &mut rng);
+            let at1k = warm1k_row(counter, &solver, &moved, &mut angles, &mut state, &mut rng);
+            for (name, predict) in [(TRACK1K, false), (TRACK1K_PREDICT, true)] {
+                track_row(counter, (name, &solver, predict), &at1k, &angles);
+            }
         }
     }
 }
@@ -281,7 +284,8 @@ fn solve_rows(counter: &mut Counter) {
 /// The next frame of the live loop at its real rate: at 1 kHz a hand moving
 /// at 2 m/s moves at most 2 mm per frame. The goals move by up to 1.15 mm
 /// per axis (≤ 2 mm) from the warm row's solution, solved with its state.
-/// Prints `met <row> <goals met within the tolerance> <goals>` after the row.
+/// Prints `met <row> <goals met within the tolerance> <goals>` after the
+/// row; returns the goals.
 fn warm1k_row(
     counter: &mut Counter,
     solver: &Solver,
@@ -289,7 +293,7 @@ fn warm1k_row(
     angles: &mut Angles<SEGMENTS>,
     state: &mut SolverState<SEGMENTS>,
     rng: &mut Lcg,
-) {
+) -> GoalSet<4> {
     let body = cmu::BODY;
     let mut pose = Pose::<SEGMENTS>::default();
     let mut moved = *previous;
@@ -317,6 +321,73 @@ fn warm1k_row(
         .u32(met as u32)
         .str(" ")
         .u32(moved.as_slice().len() as u32)
+        .print();
+    moved
+}
+
+/// A tracking loop at 1 kHz fed its own solutions: each frame solves from
+/// the last frame's solution.
+const TRACK1K: &str = "solve.cmu4.track1k.treedls";
+/// The same loop starting each frame from the last two solutions
+/// extrapolated at constant velocity (`2·θₜ − θₜ₋₁`, clamped into the
+/// limits), the prediction counted in the row.
+const TRACK1K_PREDICT: &str = "solve.cmu4.track1k.predict";
+/// Frames of the tracking rows.
+const TRACK_FRAMES: u32 = 40;
+
+/// The row `name`: [`TRACK_FRAMES`] frames of a tracking loop at 1 kHz
+/// from `start` with a new state, the goals circling about `goals` at
+/// 1.5 m/s (2 cm radius at 75 rad/s, phases a quarter turn apart), each
+/// solved from the last frame's solution (`predict`: extrapolated); a first
+/// frame, not counted, solves onto the circles. Prints `met <row> <frames
+/// with every goal met> <frames>` after the row.
+fn track_row(
+    counter: &mut Counter,
+    (name, solver, predict): (&str, &Solver, bool),
+    goals: &GoalSet<4>,
+    start: &Angles<SEGMENTS>,
+) {
+    let body = cmu::BODY;
+    let mut pose = Pose::<SEGMENTS>::default();
+    let mut state = SolverState::<SEGMENTS>::new();
+    let (mut angles, mut last) = (*start, *start);
+    let (mut ticks, mut met) = (0u32, 0u32);
+    for frame in 0..=TRACK_FRAMES {
+        let mut moved = *goals;
+        for (k, g) in moved.as_mut_slice().iter_mut().enumerate() {
+            if let Target::Position(p) = &mut g.target {
+                let a = 0.075 * frame as f32 + 1.57 * k as f32;
+                *p += Vec3::new(math::cos(a) - 1.0, math::sin(a), 0.0) * 0.02;
+            }
+        }
+        let (solved, mut result) = (angles, None);
+        let t = counter.ticks(|| {
+            if predict && frame > 1 {
+                for (v, p) in angles.values.iter_mut().zip(&last.values) {
+                    for (x, y) in v.iter_mut().zip(p) {
+                        *x += *x - *y;
+                    }
+                }
+                angles.clamp_to_limits(&body);
+            }
+            result =
+                solve::solve_with(solver, &body, &moved, &mut angles, &mut pose, &mut state).ok();
+        });
+        last = solved;
+        if frame > 0 {
+            ticks = ticks.saturating_add(t);
+            let all = result.is_some_and(|r| r.residuals.iter().all(|&x| x <= solver.tolerance));
+            met += u32::from(all);
+        }
+    }
+    report(name, "-", TRACK_FRAMES as usize, ticks);
+    Line::new()
+        .str("met ")
+        .str(name)
+        .str(" ")
+        .u32(met)
+        .str(" ")
+        .u32(TRACK_FRAMES)
         .print();
 }
 
