@@ -304,14 +304,7 @@ fn the_warm_solve_at_1_khz_meets_every_goal_on_the_emulated_board() {
     // The bench prints `met <row> <goals within the tolerance> <goals>`
     // after the row `solve.cmu4.warm1k.treedls`.
     let console = icount::run_bench().unwrap();
-    let met: Vec<&str> = console
-        .lines()
-        .find(|l| l.starts_with("met solve.cmu4.warm1k.treedls "))
-        .unwrap_or_else(|| panic!("no met line: {console}"))
-        .split_whitespace()
-        .skip(2)
-        .collect();
-    assert_eq!(met, ["4", "4"]);
+    assert_eq!(met_line(&console, "solve.cmu4.warm1k.treedls"), ["4", "4"]);
     let rows = icount::parse(&console).unwrap();
     let row = rows
         .iter()
@@ -324,17 +317,21 @@ fn the_warm_solve_at_1_khz_meets_every_goal_on_the_emulated_board() {
     // And `met <row> <frames with every goal met> <frames>` after the
     // tracking rows: every goal on every frame, plain and predicted.
     for name in ["solve.cmu4.track1k.treedls", "solve.cmu4.track1k.predict"] {
-        let met: Vec<&str> = console
-            .lines()
-            .find(|l| l.starts_with(&format!("met {name} ")))
-            .unwrap_or_else(|| panic!("no met line for {name}: {console}"))
-            .split_whitespace()
-            .skip(2)
-            .collect();
-        assert_eq!(met, ["40", "40"], "{name}");
+        assert_eq!(met_line(&console, name), ["40", "40"], "{name}");
         let row = rows.iter().find(|r| r.name == name).unwrap();
         println!("{name}: {:.0} instructions per frame", row.instructions);
     }
+}
+
+/// The counts of the bench's `met <row> <met> <of>` line after `row`.
+fn met_line<'c>(console: &'c str, row: &str) -> Vec<&'c str> {
+    console
+        .lines()
+        .find(|l| l.starts_with(&format!("met {row} ")))
+        .unwrap_or_else(|| panic!("no met line for {row}: {console}"))
+        .split_whitespace()
+        .skip(2)
+        .collect()
 }
 
 /// Budgets around what a 1 kHz `humanoid16` frame leaves the solver: how

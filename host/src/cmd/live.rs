@@ -342,7 +342,7 @@ pub fn live(
     let replies = Replies::spawn(serial.try_clone().map_err(|e| format!("{port}: {e}"))?);
     let link = Link::Uart { baud };
     let sender = Sender::spawn(serial, link, args.frame);
-    stream::handshake(&sender, &replies, (&port, Duration::from_secs(10)), stop)?;
+    stream::handshake(&sender, &replies, &port, Duration::from_secs(10), stop)?;
     stream::arm(&sender, &replies, &port)?;
     std::fs::create_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
     let mut recording = Recording::create(&args.out.join("live.csv"))?;

@@ -259,7 +259,8 @@ impl Replies {
 pub fn handshake(
     sender: &Sender,
     replies: &Replies,
-    (port, limit): (&str, Duration),
+    port: &str,
+    limit: Duration,
     stop: &AtomicBool,
 ) -> Result<(), CmdError> {
     let deadline = Instant::now() + limit;
@@ -483,12 +484,7 @@ pub fn stream(args: &Args, stop: &AtomicBool) -> Result<(Summary, Vec<Message>),
     let replies = Replies::spawn(reader);
     let link = Link::Uart { baud: args.baud };
     let sender = Sender::spawn(port, link, args.frame);
-    handshake(
-        &sender,
-        &replies,
-        (&args.port, Duration::from_secs(5)),
-        stop,
-    )?;
+    handshake(&sender, &replies, &args.port, Duration::from_secs(5), stop)?;
     arm(&sender, &replies, &args.port)?;
     let mut rig_blob = vec![0u8; marionette_core::rig::MAX_BLOB_LEN];
     let n = rig
