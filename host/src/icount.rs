@@ -285,8 +285,8 @@ pub fn replay(
     image.extend_from_slice(b"RPLY");
     // The loop's own budget: both words u32::MAX.
     let budget = budget.unwrap_or(Budget::uniform(u32::MAX));
-    image.extend_from_slice(&budget.plain.to_le_bytes());
-    image.extend_from_slice(&budget.adjusted.to_le_bytes());
+    image.extend_from_slice(&budget.plain().to_le_bytes());
+    image.extend_from_slice(&budget.adjusted().to_le_bytes());
     image.extend_from_slice(
         &u32::try_from(session.len())
             .unwrap_or(u32::MAX)

@@ -46,17 +46,32 @@ const fn make_table() -> [u32; 256] {
     table
 }
 
-/// Advances the (non-inverted) CRC register over `bytes`.
+/// Advances the (non-inverted) CRC register over one byte.
+#[inline(always)]
+fn byte(reg: u32, b: u8) -> u32 {
+    // `& 0xFF` bounds the index to 0..=255 and TABLE has 256 entries.
+    let idx = ((reg ^ u32::from(b)) & 0xFF) as usize;
+    let t = match TABLE.get(idx) {
+        Some(t) => *t,
+        None => 0,
+    };
+    t ^ (reg >> 8)
+}
+
+/// Advances the (non-inverted) CRC register over `bytes`: four bytes per
+/// turn of the loop (the same table steps, a quarter of the loop's own
+/// work), then the rest one by one.
 #[inline]
 fn step(mut reg: u32, bytes: &[u8]) -> u32 {
-    for &b in bytes {
-        // `& 0xFF` bounds the index to 0..=255 and TABLE has 256 entries.
-        let idx = ((reg ^ u32::from(b)) & 0xFF) as usize;
-        let t = match TABLE.get(idx) {
-            Some(t) => *t,
-            None => 0,
-        };
-        reg = t ^ (reg >> 8);
+    let words = bytes.chunks_exact(4);
+    let tail = words.remainder();
+    for w in words {
+        if let &[a, b, c, d] = w {
+            reg = byte(byte(byte(byte(reg, a), b), c), d);
+        }
+    }
+    for &b in tail {
+        reg = byte(reg, b);
     }
     reg
 }

@@ -109,7 +109,7 @@
 
 use crate::body::{Angles, Body};
 use crate::clip::Clips;
-use crate::deadline::{self, Budget};
+use crate::deadline::{self, Budget, Received};
 use crate::goal::GoalSet;
 use crate::grid::{Adjust, Grid, Query};
 use crate::layer::{self, Layers, MAX_LAYERS, Playhead, Root};
@@ -420,6 +420,8 @@ pub struct Pipeline<'r, 'a, const N: usize = MAX_SEGMENTS> {
     budget: Budget,
     /// The last frame's synthesis adjusted the parameters.
     adjusted_now: bool,
+    /// What the last frame brought (its share of the reserve).
+    received: Received,
     /// The last frame's solve.
     last_solve: SolveStats,
     slews: [Option<Slew>; MAX_SERVOS],
@@ -496,6 +498,10 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             solver,
             budget: Budget::for_rig(rig.frame_period_us(), deadline::CLOCK_HZ, rig.body().len()),
             adjusted_now: false,
+            received: Received {
+                sensors: 0,
+                compact: true,
+            },
             last_solve: SolveStats::NONE,
             slews,
             step_dt: None,
@@ -722,6 +728,7 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
     pub fn take(&mut self, frame: &ValidTrackerFrame) -> f32 {
         let dt = self.frame_dt(frame.time_us());
         self.remember(frame);
+        self.received = Received::of(frame);
         dt
     }
 
@@ -908,7 +915,7 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
     fn solve(&mut self) -> bool {
         let body: Body<'_> = self.rig.body();
         self.warm.start(&body, &self.goals, &mut self.angles);
-        let budget = self.budget.get(self.adjusted_now);
+        let budget = self.budget.get(self.adjusted_now, self.received);
         match solve::solve_into(
             &SOLVER.with_budget(budget),
             &body,

@@ -64,10 +64,10 @@ impl<'a> Messages<'a> {
             rest,
             left: u32::from_le_bytes(count.try_into().ok()?),
         };
-        let budget = Budget {
-            plain: u32::from_le_bytes(plain.try_into().ok()?),
-            adjusted: u32::from_le_bytes(adjusted.try_into().ok()?),
-        };
+        let budget = Budget::fixed(
+            u32::from_le_bytes(plain.try_into().ok()?),
+            u32::from_le_bytes(adjusted.try_into().ok()?),
+        );
         (magic == b"RPLY").then_some((budget, messages))
     }
 }

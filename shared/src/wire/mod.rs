@@ -266,7 +266,8 @@
 //! - Sender: [`encode`] a [`Message`] into a buffer of [`MAX_FRAME`] bytes and
 //!   write the returned slice.
 //! - Board receiver: [`Receiver`] (bytes in, validated [`Incoming`] out, all
-//!   counters kept; tracker frames validated in place), or the pieces:
+//!   counters kept; tracker frames, compact or `f32`, read and validated in
+//!   place: [`CompactView`](compact::CompactView), [`TrackerView`]), or the pieces:
 //!   [`FrameReader`] → [`decode_frame`] → [`SeqTracker`] → `validate()`.
 //!
 //! Nothing here allocates or panics.
@@ -279,6 +280,7 @@ mod message;
 mod reader;
 mod receiver;
 mod seq;
+mod tracker;
 mod validate;
 
 pub use compact::CompactFrame;
@@ -292,6 +294,7 @@ pub use message::{
 pub use reader::FrameReader;
 pub use receiver::{Incoming, Receiver, Session};
 pub use seq::{STALE_WINDOW, SeqTracker};
+pub use tracker::{SENSOR_WIRE_BYTES, TRACKER_TAG, TrackerView};
 pub use validate::{
     JOG_TARGET_MAX, PARAM_LIMIT, POSITION_LIMIT_M, QUAT_NORM2_TOLERANCE, SensorSample,
     ValidCommand, ValidParams, ValidTrackerFrame, WEIGHT_LIMIT,

@@ -2,10 +2,11 @@
 //! messages out.
 
 use super::compact::{self, COMPACT_TAG, CompactView, SENSOR_BYTES};
+use super::tracker::{TRACKER_TAG, TrackerView};
 use super::validate::{ValidCommand, ValidParams, ValidTrackerFrame};
 use super::{
     CRC_LEN, ErrorCounters, FRAME_CAPACITY, FrameReader, MIN_PROTOCOL_VERSION, Message,
-    PROTOCOL_VERSION, SeqTracker, WireError, decode_payload,
+    PROTOCOL_VERSION, Sensor, SeqTracker, WireError, decode_payload,
 };
 use crate::crc::crc32;
 
@@ -46,8 +47,9 @@ pub enum Session {
     },
 }
 
-/// Board-side receive path: [`FrameReader`] → CRC → postcard (the compact
-/// tracker frame read in place) → direction and version checks →
+/// Board-side receive path: [`FrameReader`] → CRC → postcard (tracker
+/// frames, compact or `f32`, read in place: [`CompactView`],
+/// [`TrackerView`]) → direction and version checks →
 /// [`SeqTracker`] (one counter shared by all host messages that carry `seq`)
 /// → validation. Every rejection is counted in [`Receiver::errors`].
 ///
@@ -174,10 +176,14 @@ impl Link {
             return Err(WireError::Crc);
         }
         match payload.split_first() {
-            // The hot path: read in place, no `Message` built.
+            // The hot paths: read in place, no `Message` built.
             Some((&COMPACT_TAG, body)) => {
                 let view = CompactView::new(body)?;
                 self.compact(view.seq16(), view.time24(), view.sensors())
+            }
+            Some((&TRACKER_TAG, body)) => {
+                let view = TrackerView::new(body)?;
+                self.tracker(view.seq(), view.time_us(), view.sensors())
             }
             _ => self.handle(&decode_payload(payload)?),
         }
@@ -195,12 +201,7 @@ impl Link {
                 c.sensors.iter().map(<[u8; SENSOR_BYTES]>::as_slice),
             ),
             _ if self.rejected() => Err(WireError::Version),
-            Message::TrackerFrame(f) => {
-                self.sequence(f.seq)?;
-                f.validate_into(&mut self.frame)?;
-                self.last_time = Some(f.time_us);
-                Ok(Incoming::Tracker)
-            }
+            Message::TrackerFrame(f) => self.tracker(f.seq, f.time_us, f.sensors.iter().copied()),
             Message::Params(p) => {
                 self.sequence(p.seq)?;
                 p.validate().map(Incoming::Params)
@@ -231,11 +232,28 @@ impl Link {
         let seq = compact::extend_seq(self.seq.last(), seq16);
         self.sequence(seq)?;
         let time_us = compact::extend_time(self.last_time, time24);
-        self.frame.restart(seq, time_us);
+        self.frame.restart(seq, time_us, true);
         for bytes in sensors {
             self.frame
                 .push_with(|slot| compact::unpack_sensor_into(bytes, slot))?;
         }
+        self.last_time = Some(time_us);
+        Ok(Incoming::Tracker)
+    }
+
+    /// An `f32` tracker frame: its sequence number checked, its sensors
+    /// validated in place into [`Receiver::frame`].
+    fn tracker(
+        &mut self,
+        seq: u32,
+        time_us: u32,
+        sensors: impl Iterator<Item = Sensor>,
+    ) -> Result<Incoming, WireError> {
+        if self.rejected() {
+            return Err(WireError::Version);
+        }
+        self.sequence(seq)?;
+        self.frame.validate_from(seq, time_us, sensors)?;
         self.last_time = Some(time_us);
         Ok(Incoming::Tracker)
     }

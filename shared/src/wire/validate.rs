@@ -75,6 +75,16 @@ impl Sensor {
     /// [`WireError::Range`] for id `≥ MAX_SENSORS`, a non-finite or too-far
     /// position, or a non-finite or far-from-unit quaternion.
     pub fn validate(&self) -> Result<SensorSample, WireError> {
+        let mut out = SensorSample::default();
+        self.validate_into(&mut out).map(|()| out)
+    }
+
+    /// [`Sensor::validate`] into `out`, in place (no copy of the sample);
+    /// on an error `out` is unchanged.
+    ///
+    /// # Errors
+    /// As [`Sensor::validate`].
+    pub fn validate_into(&self, out: &mut SensorSample) -> Result<(), WireError> {
         if usize::from(self.id) >= MAX_SENSORS {
             return Err(WireError::Range);
         }
@@ -89,13 +99,17 @@ impl Sensor {
         if !within(q2 - 1.0, QUAT_NORM2_TOLERANCE) {
             return Err(WireError::Range);
         }
-        Ok(SensorSample {
-            id: self.id,
-            position: Vec3::new(px, py, pz),
-            rotation: math::normalize_quat(Quat::from_xyzw(x, y, z, w)),
-        })
+        out.set(
+            self.id,
+            Vec3::new(px, py, pz),
+            math::normalize_quat(Quat::from_xyzw(x, y, z, w)),
+        );
+        Ok(())
     }
 }
+
+// `ValidTrackerFrame::ids` holds a bit per possible id.
+const _: () = assert!(MAX_SENSORS <= u16::BITS as usize);
 
 /// A validated tracker frame: every sensor valid, ids unique.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -103,6 +117,10 @@ pub struct ValidTrackerFrame {
     seq: u32,
     time_us: u32,
     sensors: List<SensorSample, MAX_SENSORS>,
+    /// Bit `id` set for each sensor taken (ids are below [`MAX_SENSORS`]).
+    ids: u16,
+    /// It came as a compact frame (tag 7), not as `f32`s.
+    compact: bool,
 }
 
 impl ValidTrackerFrame {
@@ -126,6 +144,13 @@ impl ValidTrackerFrame {
     pub fn sensor(&self, id: u8) -> Option<&SensorSample> {
         self.sensors().iter().find(|s| s.id == id)
     }
+    /// Whether it came as a compact frame (tag 7) rather than as `f32`s
+    /// (tag 1, or validated from a [`TrackerFrame`]): the two cost the
+    /// receiver differently ([`crate::deadline::Received`]).
+    #[must_use]
+    pub const fn is_compact(&self) -> bool {
+        self.compact
+    }
 }
 
 impl ValidTrackerFrame {
@@ -137,26 +162,35 @@ impl ValidTrackerFrame {
             seq: 0,
             time_us: 0,
             sensors: List::new(),
+            ids: 0,
+            compact: false,
         }
     }
 
-    /// Starts refilling the frame in place (no whole-buffer clear).
-    pub(crate) fn restart(&mut self, seq: u32, time_us: u32) {
+    /// Starts refilling the frame in place (no whole-buffer clear), from a
+    /// compact frame or not.
+    pub(crate) fn restart(&mut self, seq: u32, time_us: u32, compact: bool) {
         self.seq = seq;
         self.time_us = time_us;
         self.sensors.clear();
+        self.ids = 0;
+        self.compact = compact;
     }
 
-    /// Appends a sensor, checking that its id is new.
-    ///
-    /// # Errors
-    /// [`WireError::Range`] for a repeated id or more than
-    /// [`MAX_SENSORS`] sensors.
-    pub(crate) fn push(&mut self, sample: SensorSample) -> Result<(), WireError> {
-        self.push_with(|slot| {
-            *slot = sample;
-            Ok(())
-        })
+    /// Refills the frame with `sensors`, each validated (the check of
+    /// [`TrackerFrame::validate_into`], for any source of raw sensors). On
+    /// an error the frame holds a partial frame.
+    pub(crate) fn validate_from(
+        &mut self,
+        seq: u32,
+        time_us: u32,
+        sensors: impl Iterator<Item = Sensor>,
+    ) -> Result<(), WireError> {
+        self.restart(seq, time_us, false);
+        for s in sensors {
+            self.push_with(|slot| s.validate_into(slot))?;
+        }
+        Ok(())
     }
 
     /// Appends a sensor that `fill` writes in place (no copy of it), then
@@ -171,10 +205,12 @@ impl ValidTrackerFrame {
     ) -> Result<(), WireError> {
         let slot = self.sensors.next_slot().ok_or(WireError::Range)?;
         fill(slot)?;
-        let id = slot.id;
-        if self.sensors.iter().any(|s| s.id == id) {
+        // One bit per id: constant time, not a scan of the sensors so far.
+        let bit = 1u16.checked_shl(u32::from(slot.id)).unwrap_or(0);
+        if bit == 0 || self.ids & bit != 0 {
             return Err(WireError::Range);
         }
+        self.ids |= bit;
         self.sensors.commit();
         Ok(())
     }
@@ -197,11 +233,7 @@ impl TrackerFrame {
     /// # Errors
     /// As [`TrackerFrame::validate`].
     pub fn validate_into(&self, out: &mut ValidTrackerFrame) -> Result<(), WireError> {
-        out.restart(self.seq, self.time_us);
-        for s in &self.sensors {
-            out.push(s.validate()?)?;
-        }
-        Ok(())
+        out.validate_from(self.seq, self.time_us, self.sensors.iter().copied())
     }
 }
 
