@@ -60,8 +60,9 @@ fn byte(reg: u32, b: u8) -> u32 {
 
 /// Advances the (non-inverted) CRC register over `bytes`: four bytes per
 /// turn of the loop (the same table steps, a quarter of the loop's own
-/// work), then the rest one by one.
-#[inline]
+/// work), then the rest one by one. Not inlined: one copy of the unrolled
+/// loop serves every caller.
+#[inline(never)]
 fn step(mut reg: u32, bytes: &[u8]) -> u32 {
     let words = bytes.chunks_exact(4);
     let tail = words.remainder();

@@ -183,7 +183,7 @@ impl Link {
             }
             Some((&TRACKER_TAG, body)) => {
                 let view = TrackerView::new(body)?;
-                self.tracker(view.seq(), view.time_us(), view.sensors())
+                self.tracker(view.seq(), view.time_us(), &mut view.sensors())
             }
             _ => self.handle(&decode_payload(payload)?),
         }
@@ -201,7 +201,9 @@ impl Link {
                 c.sensors.iter().map(<[u8; SENSOR_BYTES]>::as_slice),
             ),
             _ if self.rejected() => Err(WireError::Version),
-            Message::TrackerFrame(f) => self.tracker(f.seq, f.time_us, f.sensors.iter().copied()),
+            Message::TrackerFrame(f) => {
+                self.tracker(f.seq, f.time_us, &mut f.sensors.iter().copied())
+            }
             Message::Params(p) => {
                 self.sequence(p.seq)?;
                 p.validate().map(Incoming::Params)
@@ -242,12 +244,14 @@ impl Link {
     }
 
     /// An `f32` tracker frame: its sequence number checked, its sensors
-    /// validated in place into [`Receiver::frame`].
+    /// validated in place into [`Receiver::frame`]. One copy for both
+    /// sources of sensors (the in-place view and a decoded `Message`).
+    #[inline(never)]
     fn tracker(
         &mut self,
         seq: u32,
         time_us: u32,
-        sensors: impl Iterator<Item = Sensor>,
+        sensors: &mut dyn Iterator<Item = Sensor>,
     ) -> Result<Incoming, WireError> {
         if self.rejected() {
             return Err(WireError::Version);
