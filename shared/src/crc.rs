@@ -106,10 +106,14 @@ impl Crc32 {
         Self { reg: INIT }
     }
 
-    /// Feeds `bytes` into the checksum.
+    /// Feeds `bytes` into the checksum. Byte by byte, inlined: an encoder
+    /// feeds a few bytes at a time, too few for [`crc32`]'s unrolled loop
+    /// to pay for its call.
     #[inline]
     pub fn update(&mut self, bytes: &[u8]) {
-        self.reg = step(self.reg, bytes);
+        for &b in bytes {
+            self.reg = byte(self.reg, b);
+        }
     }
 
     /// The checksum of all bytes fed so far. Does not consume the hasher:
