@@ -521,7 +521,8 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
 
     /// The solver's work per frame, in the units of
     /// [`Report::work`](solve::Report::work): the rig's frame period on the
-    /// board, less the rest of the frame ([`Budget::for_rig`]).
+    /// board, less the rest of the frame ([`Budget::for_rig`]); each frame
+    /// gets [`Budget::get`] of it for what it brought.
     #[must_use]
     pub fn solve_budget(&self) -> Budget {
         self.budget
