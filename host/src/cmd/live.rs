@@ -521,8 +521,13 @@ fn listen_loop(
     Ok((offered, start.elapsed().as_secs_f64()))
 }
 
+/// How long the emulated board may take to end its session after the
+/// Disarm (it eases every servo to rest first).
+const END_WAIT: Duration = Duration::from_secs(30);
+
 /// Waits for the emulated board to stop and compares its servo output with
-/// the core run on the recording.
+/// the core run on the recording; an error if it does not stop within
+/// [`END_WAIT`].
 fn check(
     board: &mut PtyBoard,
     (region, servo): (&Path, &Path),
@@ -530,7 +535,18 @@ fn check(
     framing: Framing,
     (replies, take): (&[Message], Option<&Path>),
 ) -> Result<Checked, CmdError> {
-    board.wait(Duration::from_secs(30))?;
+    // The board ends its session by itself once disarmed and at rest; one
+    // that has not within the wait has not sent all its servo output, and
+    // comparing part of it would report differences that are not there.
+    if board.wait(END_WAIT)?.is_none() {
+        return Err(format!(
+            "the emulated board did not end its session within {} s of the Disarm: its servo \
+             output ({}) was not compared with the native core",
+            END_WAIT.as_secs(),
+            servo.display()
+        )
+        .into());
+    }
     let region_bytes = std::fs::read(region).map_err(|e| format!("{}: {e}", region.display()))?;
     let frames = perform::frames(&crate::import::csv::read_tracker_csv(recording)?)?;
     let session = perform::session_with(&frames, framing)?;
