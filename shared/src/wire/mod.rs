@@ -311,7 +311,7 @@ pub const MIN_PROTOCOL_VERSION: u16 = 1;
 /// Bytes of CRC after the payload.
 pub const CRC_LEN: usize = 4;
 /// Largest postcard payload of any [`Message`] (a full `TrackerFrame`).
-pub const MAX_PAYLOAD: usize = 1 + 5 + 5 + 1 + MAX_SENSORS * 29;
+pub const MAX_PAYLOAD: usize = 1 + 5 + 5 + 1 + MAX_SENSORS * SENSOR_WIRE_BYTES;
 /// Largest decoded frame (payload + CRC): the [`FrameReader`] buffer size.
 pub const FRAME_CAPACITY: usize = MAX_PAYLOAD + CRC_LEN;
 /// Largest encoded frame, including the `0x00` delimiter.
