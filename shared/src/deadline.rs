@@ -21,18 +21,20 @@
 //! ```text
 //! frame  = frame_period_us × CLOCK_HZ / 10⁶ cycles × 100 / CPI_PERCENT instructions
 //! solver = frame − RESERVE_BASE − RESERVE_PER_SEGMENT × segments
+//!          − what the frame synthesized: its counted work (Synthesis),
+//!            and RESERVE_ADJUSTED when it had to adjust the parameters
 //!          − what the frame brought: RESERVE_PER_SENSOR × sensors (compact), or
-//!            RESERVE_F32_FRAME + RESERVE_PER_F32_SENSOR × sensors (f32 frames)
-//!          (− ADJUSTED_PER_SEGMENT × segments when the synthesis had to adjust
-//!           the parameters, which it knows before the solve),
+//!            RESERVE_F32_FRAME + RESERVE_PER_F32_SENSOR × sensors (f32 frames),
 //!          a plain frame's at least MIN_SOLVE_BUDGET
 //! ```
 //!
-//! A frame's sensors and framing ([`Received`]) are known once it is
-//! decoded, so a tracker setup that sends more sensors than the rig reads,
-//! or `f32` frames rather than compact ones, gets a solver budget that
-//! much smaller, frame by frame, instead of a reserve measured on one
-//! recording's frames.
+//! Both shares are the frame's own, known before the solve. The synthesis
+//! counts its work itself ([`crate::grid::cost`]): the table's window read
+//! and blended for every segment (8 samples on the shipped trilinear grid,
+//! up to 256 on a grid of Catmull-Rom axes) and the cells a projection
+//! scanned, so a finer or smoother table gets a smaller solver budget
+//! frame by frame, as a frame's sensors and framing ([`Received`]) do,
+//! instead of the reserve of the table it was measured on.
 //!
 //! Within the budget it is a ceiling: the solver starts no iteration whose
 //! counted cost does not fit what is left of it, and a solve whose budget
@@ -50,30 +52,35 @@
 //! usually suffices because the solver keeps its warm active set from frame
 //! to frame (the joints held at their limits: [`crate::solve`]'s system).
 //!
-//! The floor is for a rig whose period is too short for that: below it the
-//! solver cannot take one whole-tree step on a rig like `humanoid16` (its
-//! fixed part and one iteration, by the cost model), and a loop that never
-//! moves towards its goals is no puppet. Such a rig's plain frames get the
-//! floor and may run over their period by up to the difference, bounded by
-//! the reserve and the floor; the board counts them in `Telemetry`'s
-//! overruns. Its adjusted frames, the hard ones, never get it: they keep
-//! what the period leaves, so no frame runs over by more than a plain one.
-//! README's "Real time" gives the figures.
+//! The floor is for a rig and table whose period is too short for that
+//! ([`Budget::keeps_period`] says which): below it the solver cannot take
+//! one whole-tree step on a rig like `humanoid16` (its fixed part and one
+//! iteration, by the cost model), and a loop that never moves towards its
+//! goals is no puppet. Such plain frames get the floor and may run over
+//! their period by up to the difference; the board counts them in
+//! `Telemetry`'s overruns, and the pipeline counts the frames it knew
+//! could ([`Pipeline::short_frames`](crate::frame::Pipeline::short_frames)).
+//! An adjusted frame, a hard one, never gets the floor: it keeps what the
+//! period leaves, so it runs over only when its synthesis alone does not
+//! fit the period (a projection over many cells, a window of many
+//! samples). README's "Real time" gives the figures.
 //!
 //! Every input is the rig's or a constant, so the board, the emulated board
 //! and the host's native replay take the same decisions and their outputs
 //! stay bit-identical.
 //!
 //! The reserve is the rest of the frame (receiving and decoding the frame,
-//! the sensor map, the synthesis, the servo map): its worst, measured on
-//! the emulated board by `tests/realtime.rs` over the bundled recording
-//! sent compact and as `f32` frames, the same with a sensor the rig does
-//! not read, and four other HDM05 clips recorded at 1 kHz. That test also
-//! checks that the reserve bounds every frame's rest, that it is within
-//! 5 % of the worst, that the solver keeps its budget on every frame, and
-//! that the goals still converge. When a stage gets faster, lower the
-//! reserve to its new worst (the same test prints it): the solver gets
-//! the difference.
+//! the sensor map, the synthesis, the servo map): its constants are the
+//! worst measured on the emulated board by `tests/realtime.rs` over the
+//! bundled recording sent compact and as `f32` frames, the same with a
+//! sensor the rig does not read, four other HDM05 clips recorded at
+//! 1 kHz, and the recording on three other tables (finer, two axes, a
+//! Catmull-Rom axis). That test also checks that the reserve bounds every
+//! frame's rest, that it is within 5 % of some frame's rest, plain and
+//! adjusted, that the solver keeps its budget on every frame, that only
+//! the frames this module says may run over do, and that the goals still
+//! converge. When a stage gets faster, lower the reserve to its new worst
+//! (the same test prints it): the solver gets the difference.
 
 use crate::wire::{MAX_SENSORS, ValidTrackerFrame};
 
@@ -93,21 +100,30 @@ pub const CLOCK_HZ: u32 = 100_000_000;
 pub const CPI_PERCENT: u32 = 168;
 
 /// Instructions of the stages around the solver that grow neither with
-/// the rig's segments nor with the frame's sensors: receiving and decoding
-/// a frame besides its sensors, the sensor map, the servo map, the loop's
-/// own work and the solver's besides its counted work.
+/// the rig's segments nor with the frame's sensors nor with the table:
+/// receiving and decoding a frame besides its sensors, the sensor map, the
+/// servo map, the loop's own work and the solver's besides its counted
+/// work.
 pub const RESERVE_BASE: u32 = 8_870;
 
-/// Instructions of the synthesis per segment of the rig when it uses the
-/// parameters as given (with [`RESERVE_BASE`], at least the worst rest of
-/// a frame `tests/realtime.rs` measures for `humanoid16`'s 13 segments, and
-/// within 5 % of it: the test checks both).
-pub const RESERVE_PER_SEGMENT: u32 = 1_692;
+/// Instructions per segment of the rig outside the solver besides the
+/// synthesis's counted work ([`Synthesis`]): the synthesized pose made
+/// local and turned into joint angles, and the servo map (with
+/// [`RESERVE_BASE`], at least the worst rest of a frame `tests/realtime.rs`
+/// measures for `humanoid16`'s 13 segments, and within 5 % of it: the test
+/// checks both).
+pub const RESERVE_PER_SEGMENT: u32 = 949;
 
-/// More instructions of the synthesis per segment when it had to clamp or
-/// project the parameters into the table (the same rule for the worst rest
-/// of such a frame).
-pub const ADJUSTED_PER_SEGMENT: u32 = 620;
+/// More instructions outside the synthesis's counted work in a frame
+/// whose synthesis had to clamp or project the parameters (the worst rest
+/// of such a frame `tests/realtime.rs` measures, the same rule as
+/// [`RESERVE_PER_SEGMENT`]).
+pub const RESERVE_ADJUSTED: u32 = 1_910;
+
+/// Instructions per segment of each layer of a layered rig besides its
+/// synthesis's counted work: its pose made local and blended over the
+/// others (`crate::layer`).
+pub const LAYER_PER_SEGMENT: u32 = 600;
 
 /// The floor of a plain frame's budget, for a rig whose period is too
 /// short: when a plain frame's period less its reserve is below this, its
@@ -170,18 +186,33 @@ impl Received {
     }
 }
 
+/// What a frame's synthesis did, which its share of the reserve depends
+/// on: known once it has run, before the solve.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Synthesis {
+    /// Its work by the synthesis's own count
+    /// ([`Query::work`](crate::grid::Query::work)): the table's window
+    /// for every segment and the projection, if it took one.
+    pub work: u32,
+    /// It had to clamp or project the parameters into the table.
+    pub adjusted: bool,
+}
+
 /// The solver's work per frame, in the units of
 /// [`Report::work`](crate::solve::Report::work), by what the frame needs
-/// before the solve: whether its synthesis used the parameters as given
-/// ("plain") or had to adjust them, and what it brought ([`Received`]).
+/// before the solve: what its synthesis did ([`Synthesis`]) and what it
+/// brought ([`Received`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Budget {
-    /// A plain frame's (for a rig's budget: before its [`Received`]).
+    /// A plain frame's (for a rig's budget: the period less
+    /// [`RESERVE_BASE`] and [`RESERVE_PER_SEGMENT`]s, before the frame's
+    /// own share).
     plain: u32,
     /// An adjusted frame's (likewise).
     adjusted: u32,
-    /// A rig's budget: what the frame received comes off it, and a plain
-    /// frame gets at least [`MIN_SOLVE_BUDGET`]. Otherwise fixed.
+    /// A rig's budget: what the frame synthesized and received comes off
+    /// it, and a plain frame gets at least [`MIN_SOLVE_BUDGET`]. Otherwise
+    /// fixed.
     rig: bool,
 }
 
@@ -193,7 +224,7 @@ impl Budget {
     }
 
     /// A fixed budget for plain and adjusted frames, whatever they
-    /// received.
+    /// synthesized and received.
     #[must_use]
     pub const fn fixed(plain: u32, adjusted: u32) -> Self {
         Budget {
@@ -216,7 +247,7 @@ impl Budget {
     }
 
     /// A plain frame's budget as given: for a rig's, before what the
-    /// frame received comes off it and before the floor.
+    /// frame synthesized and received comes off it, and before the floor.
     #[must_use]
     pub const fn plain(&self) -> u32 {
         self.plain
@@ -228,20 +259,58 @@ impl Budget {
         self.adjusted
     }
 
-    /// The budget of a frame whose synthesis adjusted the parameters or
-    /// not, and that brought `received`.
+    /// What the period leaves the solver of a frame that synthesized
+    /// `synthesis` and brought `received`, before the floor (a fixed
+    /// budget: as given).
     #[must_use]
-    pub const fn get(&self, adjusted: bool, received: Received) -> u32 {
-        let given = if adjusted { self.adjusted } else { self.plain };
+    pub const fn left(&self, synthesis: Synthesis, received: Received) -> u32 {
+        let given = if synthesis.adjusted {
+            self.adjusted
+        } else {
+            self.plain
+        };
         if !self.rig {
             return given;
         }
-        let left = given.saturating_sub(received.work());
-        if adjusted || left >= MIN_SOLVE_BUDGET {
+        given
+            .saturating_sub(received.work())
+            .saturating_sub(synthesis.work)
+    }
+
+    /// The budget of a frame that synthesized `synthesis` and brought
+    /// `received`: what the period leaves, for a rig's plain frame at least
+    /// [`MIN_SOLVE_BUDGET`].
+    #[must_use]
+    pub const fn get(&self, synthesis: Synthesis, received: Received) -> u32 {
+        let left = self.left(synthesis, received);
+        if !self.rig || synthesis.adjusted || left >= MIN_SOLVE_BUDGET {
             left
         } else {
             MIN_SOLVE_BUDGET
         }
+    }
+
+    /// Whether a rig's plain frames that synthesized `synthesis` and
+    /// brought `received` keep the period: the period leaves their solver
+    /// at least [`MIN_SOLVE_BUDGET`], so they never get the floor and
+    /// never run over.
+    #[must_use]
+    pub const fn keeps_period(&self, synthesis: Synthesis, received: Received) -> bool {
+        self.left(synthesis, received) >= MIN_SOLVE_BUDGET
+    }
+
+    /// Whether a frame that synthesized `synthesis` and brought `received`
+    /// may run over its period under a rig's budget: a plain one the period
+    /// leaves less than the floor (it gets the floor), or one whose reserve
+    /// alone takes the whole period. Never for a fixed budget (its frames
+    /// take what the caller gave them).
+    #[must_use]
+    pub const fn may_overrun(&self, synthesis: Synthesis, received: Received) -> bool {
+        if !self.rig {
+            return false;
+        }
+        let left = self.left(synthesis, received);
+        left == 0 || (!synthesis.adjusted && left < MIN_SOLVE_BUDGET)
     }
 }
 
@@ -257,22 +326,24 @@ pub const fn frame_instructions(period_us: u32, clock_hz: u32) -> u32 {
     }
 }
 
-/// The reserve without what the frame received.
+/// The reserve without the frame's own share.
 const fn rest_reserve(segments: usize, adjusted: bool) -> u32 {
-    let per = if adjusted {
-        RESERVE_PER_SEGMENT + ADJUSTED_PER_SEGMENT
+    let rest = RESERVE_BASE.saturating_add((segments as u32).saturating_mul(RESERVE_PER_SEGMENT));
+    if adjusted {
+        rest.saturating_add(RESERVE_ADJUSTED)
     } else {
-        RESERVE_PER_SEGMENT
-    };
-    RESERVE_BASE.saturating_add((segments as u32).saturating_mul(per))
+        rest
+    }
 }
 
 /// The instructions the rest of a frame takes for a rig of `segments`
-/// segments, when the synthesis `adjusted` the parameters or not, for a
-/// frame that brought `received`.
+/// segments, for a frame that synthesized `synthesis` and brought
+/// `received`.
 #[must_use]
-pub const fn reserve(segments: usize, adjusted: bool, received: Received) -> u32 {
-    rest_reserve(segments, adjusted).saturating_add(received.work())
+pub const fn reserve(segments: usize, synthesis: Synthesis, received: Received) -> u32 {
+    rest_reserve(segments, synthesis.adjusted)
+        .saturating_add(received.work())
+        .saturating_add(synthesis.work)
 }
 
 /// The solver's budget for one frame, in the units of
@@ -284,10 +355,10 @@ pub const fn solve_budget(
     period_us: u32,
     clock_hz: u32,
     segments: usize,
-    adjusted: bool,
+    synthesis: Synthesis,
     received: Received,
 ) -> u32 {
-    Budget::for_rig(period_us, clock_hz, segments).get(adjusted, received)
+    Budget::for_rig(period_us, clock_hz, segments).get(synthesis, received)
 }
 
 #[cfg(test)]
@@ -300,6 +371,18 @@ mod tests {
         compact: true,
     };
 
+    /// A plain synthesis of about the shipped table's work.
+    const PLAIN: Synthesis = Synthesis {
+        work: 9_000,
+        adjusted: false,
+    };
+
+    /// An adjusted one, with a projection.
+    const ADJUSTED: Synthesis = Synthesis {
+        work: 15_000,
+        adjusted: true,
+    };
+
     #[test]
     fn one_millisecond_at_100_mhz_is_59523_instructions() {
         // 100,000 cycles / 1.68 = 59,523.8.
@@ -309,23 +392,21 @@ mod tests {
     }
 
     #[test]
-    fn the_reserve_counts_segments_and_what_the_frame_brought() {
+    fn the_reserve_counts_segments_the_synthesis_and_what_the_frame_brought() {
         let three = 3 * RESERVE_PER_SENSOR;
+        let rest = RESERVE_BASE + 13 * RESERVE_PER_SEGMENT;
+        assert_eq!(reserve(13, PLAIN, THREE), rest + 9_000 + three);
         assert_eq!(
-            reserve(13, false, THREE),
-            RESERVE_BASE + 13 * RESERVE_PER_SEGMENT + three
-        );
-        assert_eq!(
-            reserve(13, true, THREE),
-            RESERVE_BASE + 13 * (RESERVE_PER_SEGMENT + ADJUSTED_PER_SEGMENT) + three
+            reserve(13, ADJUSTED, THREE),
+            rest + RESERVE_ADJUSTED + 15_000 + three
         );
         let f32s = Received {
             sensors: 4,
             compact: false,
         };
         assert_eq!(
-            reserve(13, false, f32s),
-            reserve(13, false, THREE) - three + RESERVE_F32_FRAME + 4 * RESERVE_PER_F32_SENSOR
+            reserve(13, PLAIN, f32s),
+            rest + 9_000 + RESERVE_F32_FRAME + 4 * RESERVE_PER_F32_SENSOR
         );
         // No frame carries more than `MAX_SENSORS`.
         let many = |sensors| Received {
@@ -333,42 +414,75 @@ mod tests {
             compact: true,
         };
         assert_eq!(many(usize::MAX).work(), many(MAX_SENSORS).work());
+        // Nothing wraps.
+        let huge = Synthesis {
+            work: u32::MAX,
+            adjusted: false,
+        };
+        assert_eq!(reserve(13, huge, THREE), u32::MAX);
     }
 
     #[test]
     fn the_budget_is_the_period_less_the_reserve_with_a_floor_for_plain_frames() {
-        // humanoid16 at 1 kHz with the recording's frames: a plain frame is
-        // left at least the floor, so both budgets are the period less the
-        // reserve.
+        // humanoid16 at 1 kHz: both budgets are the period less the
+        // reserve, the plain one above the floor.
         let b = Budget::for_rig(1000, CLOCK_HZ, 13);
-        assert_eq!(b.get(false, THREE), 59_523 - reserve(13, false, THREE));
-        assert_eq!(b.get(true, THREE), 59_523 - reserve(13, true, THREE));
-        assert!(b.get(false, THREE) >= MIN_SOLVE_BUDGET);
-        assert!(b.get(true, THREE) < MIN_SOLVE_BUDGET);
-        // One more sensor leaves a plain frame the floor, and an adjusted
-        // one what is left.
-        let four = Received {
-            sensors: 4,
-            compact: true,
-        };
-        assert_eq!(b.get(false, four), MIN_SOLVE_BUDGET);
-        assert_eq!(b.get(true, four), 59_523 - reserve(13, true, four));
-        // A period that leaves a plain frame less: the floor on a plain
-        // frame, what is left (here nothing) on an adjusted one.
-        let short = Budget::for_rig(900, CLOCK_HZ, 13);
-        assert_eq!(short.get(false, THREE), MIN_SOLVE_BUDGET);
-        assert_eq!(short.get(true, THREE), 53_571 - reserve(13, true, THREE));
+        assert_eq!(b.get(PLAIN, THREE), 59_523 - reserve(13, PLAIN, THREE));
         assert_eq!(
-            solve_budget(100, CLOCK_HZ, 13, false, THREE),
+            b.get(ADJUSTED, THREE),
+            59_523 - reserve(13, ADJUSTED, THREE)
+        );
+        assert!(b.get(PLAIN, THREE) >= MIN_SOLVE_BUDGET);
+        assert!(b.keeps_period(PLAIN, THREE));
+        // A heavier synthesis (a finer window) leaves a plain frame the
+        // floor, which does not keep the period, and an adjusted one
+        // what is left.
+        let heavy = Synthesis {
+            work: 20_000,
+            adjusted: false,
+        };
+        assert_eq!(b.get(heavy, THREE), MIN_SOLVE_BUDGET);
+        assert!(!b.keeps_period(heavy, THREE));
+        assert!(b.may_overrun(heavy, THREE));
+        assert!(!b.may_overrun(PLAIN, THREE));
+        assert!(!b.may_overrun(ADJUSTED, THREE));
+        let heavy_adjusted = Synthesis {
+            adjusted: true,
+            ..heavy
+        };
+        assert_eq!(
+            b.get(heavy_adjusted, THREE),
+            59_523 - reserve(13, heavy_adjusted, THREE)
+        );
+        // A synthesis longer than the period: the floor, or nothing.
+        let cubic = Synthesis {
+            work: 262_000,
+            adjusted: false,
+        };
+        assert_eq!(b.get(cubic, THREE), MIN_SOLVE_BUDGET);
+        let cubic_adjusted = Synthesis {
+            adjusted: true,
+            ..cubic
+        };
+        assert_eq!(b.get(cubic_adjusted, THREE), 0);
+        assert!(b.may_overrun(cubic_adjusted, THREE));
+        // An adjusted frame left less than the floor but more than nothing
+        // keeps its period (it solves less).
+        assert!(!b.may_overrun(heavy_adjusted, THREE));
+        assert!(!Budget::uniform(0).may_overrun(cubic, THREE));
+        // A shorter period: the floor on a plain frame, what is left (here
+        // nothing) on an adjusted one.
+        assert_eq!(
+            solve_budget(100, CLOCK_HZ, 13, PLAIN, THREE),
             MIN_SOLVE_BUDGET
         );
-        assert_eq!(solve_budget(100, CLOCK_HZ, 13, true, THREE), 0);
+        assert_eq!(solve_budget(100, CLOCK_HZ, 13, ADJUSTED, THREE), 0);
         // At 500 Hz: the period less the reserve.
         let b = Budget::for_rig(2000, CLOCK_HZ, 13);
-        assert_eq!(b.get(false, THREE), 119_047 - reserve(13, false, THREE));
-        assert_eq!(b.get(true, THREE), 119_047 - reserve(13, true, THREE));
-        // A fixed budget is what it says, whatever the frame brought.
-        assert_eq!(Budget::uniform(7).get(true, four), 7);
-        assert_eq!(Budget::fixed(5, 6).get(false, four), 5);
+        assert_eq!(b.get(heavy, THREE), 119_047 - reserve(13, heavy, THREE));
+        // A fixed budget is what it says, whatever the frame did.
+        assert_eq!(Budget::uniform(7).get(cubic_adjusted, THREE), 7);
+        assert_eq!(Budget::fixed(5, 6).get(cubic, THREE), 5);
+        assert_eq!(Budget::fixed(5, 6).get(ADJUSTED, THREE), 6);
     }
 }

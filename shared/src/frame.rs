@@ -109,7 +109,7 @@
 
 use crate::body::{Angles, Body};
 use crate::clip::Clips;
-use crate::deadline::{self, Budget, Received};
+use crate::deadline::{self, Budget, Received, Synthesis};
 use crate::goal::GoalSet;
 use crate::grid::{Adjust, Grid, Query};
 use crate::layer::{self, Layers, MAX_LAYERS, Playhead, Root};
@@ -333,20 +333,22 @@ fn layer_pose<const N: usize>(
     state: &mut LayerState,
     dt: f32,
     (query, out): (&mut Query, &mut Pose<N>),
-) -> Option<Adjust> {
+) -> Option<(Adjust, u32)> {
     let grid = table.grid().ok()?;
     match table.kind() {
         Kind::Grid => {
             grid.query_into(params, query).ok()?;
             query.pose(table, out).ok()?;
-            Some(query.adjust())
+            Some((query.adjust(), query.work(out.count)))
         }
         Kind::Clips { phases } => {
             let clips = Clips::new(grid, table.param_grid().ok()?, usize::from(phases)).ok()?;
             let motion = clips.motion(table, params).ok()?;
             let phase = state.playhead.advance(&motion, dt);
             clips.pose(&motion, table, phase, out).ok()?;
-            Some(motion.adjust())
+            // A clip's pose query inside its valid cells (its projection,
+            // if it takes one, is not counted).
+            Some((motion.adjust(), grid.plain_work(out.count)))
         }
     }
 }
@@ -418,8 +420,13 @@ pub struct Pipeline<'r, 'a, const N: usize = MAX_SEGMENTS> {
     solver: &'r mut SolverState<N>,
     /// The solver's work per frame ([`deadline`]).
     budget: Budget,
-    /// The last frame's synthesis adjusted the parameters.
-    adjusted_now: bool,
+    /// What the last frame's synthesis did (its share of the reserve).
+    synthesized: Synthesis,
+    /// The work of a synthesis inside the table's valid cells
+    /// ([`Grid::plain_work`]), worked out once.
+    plain_work: u32,
+    /// Frames whose budget said they may run over their period.
+    short_frames: u32,
     /// What the last frame brought (its share of the reserve).
     received: Received,
     /// The last frame's solve.
@@ -469,10 +476,15 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         let angles = rig.rest_angles().ok()?;
         let mut rest_local = LocalPose::default();
         pose::to_local(&rig.body().hierarchy(), rig.rest_pose(), &mut rest_local).ok()?;
+        let grid = region.table.as_ref().and_then(|t| t.grid().ok());
+        let plain_work = match (&grid, region.table.as_ref()) {
+            (Some(g), Some(t)) => g.plain_work(t.segment_count()),
+            _ => 0,
+        };
         Some(Self {
             rig,
             table: region.table.as_ref(),
-            grid: region.table.as_ref().and_then(|t| t.grid().ok()),
+            grid,
             layered: region.layers.as_ref().map(|l| (l, &region.layer_tables)),
             layer_state: [LayerState::START; MAX_LAYERS],
             layer_time: 0.0,
@@ -497,7 +509,12 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             local: LocalPose::default(),
             solver,
             budget: Budget::for_rig(rig.frame_period_us(), deadline::CLOCK_HZ, rig.body().len()),
-            adjusted_now: false,
+            synthesized: Synthesis {
+                work: 0,
+                adjusted: false,
+            },
+            plain_work,
+            short_frames: 0,
             received: Received {
                 sensors: 0,
                 compact: true,
@@ -532,6 +549,43 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
     /// another budget; the board keeps the one [`Pipeline::new`] sets).
     pub fn set_solve_budget(&mut self, budget: Budget) {
         self.budget = budget;
+    }
+
+    /// What the last frame's synthesis did: its counted work (all its
+    /// layers') and whether it adjusted the parameters.
+    #[must_use]
+    pub fn last_synthesis(&self) -> Synthesis {
+        self.synthesized
+    }
+
+    /// The frames so far whose reserve left the solver less than it needs
+    /// ([`Budget::may_overrun`]): on the board they may run over their
+    /// period. None on a rig and table that keep it
+    /// ([`Pipeline::keeps_period`]), unless the frames bring more sensors
+    /// or a projection takes more than the period.
+    #[must_use]
+    pub fn short_frames(&self) -> u32 {
+        self.short_frames
+    }
+
+    /// The work of a synthesis from the region's table inside its valid
+    /// cells ([`Grid::plain_work`]; 0 without a table). A layered rig's
+    /// frames count every layer's ([`Pipeline::last_synthesis`]), which
+    /// this does not.
+    #[must_use]
+    pub fn plain_synthesis_work(&self) -> u32 {
+        self.plain_work
+    }
+
+    /// Whether the rig's plain frames keep its period with this table when
+    /// each brings `received` ([`Budget::keeps_period`]).
+    #[must_use]
+    pub fn keeps_period(&self, received: Received) -> bool {
+        let plain = Synthesis {
+            work: self.plain_work,
+            adjusted: false,
+        };
+        self.budget.keeps_period(plain, received)
     }
 
     /// The last frame's solve: its iterations, its work and its budget.
@@ -850,13 +904,17 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         if grid.query_into(params, query).is_err() {
             return false;
         }
-        self.adjusted_now = query.adjust() != Adjust::None;
-        if self.adjusted_now {
+        let adjusted = query.adjust() != Adjust::None;
+        if adjusted {
             self.adjusted = self.adjusted.saturating_add(1);
         }
         if query.pose(table, &mut self.synth).is_err() {
             return false;
         }
+        self.synthesized = Synthesis {
+            work: self.plain_work.saturating_add(query.projection_work()),
+            adjusted,
+        };
         let body = self.rig.body();
         if pose::to_local(&body.hierarchy(), &self.synth, &mut self.local).is_err() {
             return false;
@@ -874,6 +932,7 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
         self.layer_time += dt;
         self.local = self.rest_local;
         let mut adjusted = false;
+        let mut work = 0u32;
         for ((layer, table), i) in layers.as_slice().iter().zip(tables).zip(0..) {
             let Some(table) = table else {
                 return false;
@@ -890,10 +949,12 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             state.fade_to(target, layer.fade_s, dt);
             let step = dt * layer.rate_at(&self.params, time);
             let out = (&mut self.query, &mut self.synth);
-            let Some(adjust) = layer_pose(table, params, state, step, out) else {
+            let Some((adjust, synthesis)) = layer_pose(table, params, state, step, out) else {
                 return false;
             };
             adjusted |= adjust != Adjust::None;
+            let blend = (self.synth.count as u32).saturating_mul(deadline::LAYER_PER_SEGMENT);
+            work = work.saturating_add(synthesis).saturating_add(blend);
             let body = self.rig.body();
             if pose::to_local(&body.hierarchy(), &self.synth, &mut self.layer_local).is_err() {
                 return false;
@@ -903,7 +964,7 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
             }
             layer::blend(&mut self.local, &self.layer_local, layer.mask, state.weight);
         }
-        self.adjusted_now = adjusted;
+        self.synthesized = Synthesis { work, adjusted };
         if adjusted {
             self.adjusted = self.adjusted.saturating_add(1);
         }
@@ -916,7 +977,10 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
     fn solve(&mut self) -> bool {
         let body: Body<'_> = self.rig.body();
         self.warm.start(&body, &self.goals, &mut self.angles);
-        let budget = self.budget.get(self.adjusted_now, self.received);
+        let budget = self.budget.get(self.synthesized, self.received);
+        if self.budget.may_overrun(self.synthesized, self.received) {
+            self.short_frames = self.short_frames.saturating_add(1);
+        }
         match solve::solve_into(
             &SOLVER.with_budget(budget),
             &body,

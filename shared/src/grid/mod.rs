@@ -104,6 +104,7 @@
 //!   parameters actually used.
 
 mod axis;
+pub mod cost;
 mod general;
 mod lanes;
 mod query;
@@ -241,6 +242,20 @@ impl<'a> Grid<'a> {
     #[must_use]
     pub fn sample_count(&self) -> usize {
         self.samples as usize
+    }
+
+    /// The work of a query inside the table's valid cells and of posing
+    /// `segments` segments from it ([`Query::work`] without a
+    /// projection): every such query's, whatever its parameters.
+    #[must_use]
+    pub fn plain_work(&self, segments: usize) -> u32 {
+        let axes = self.axes();
+        let mut widths = [0usize; MAX_AXES];
+        for (w, a) in widths.iter_mut().zip(axes) {
+            *w = if a.interp == Interp::Linear { 2 } else { 4 };
+        }
+        let widths = widths.get(..axes.len()).unwrap_or(&[]);
+        cost::locate(axes.len()).saturating_add(cost::pose(widths, segments))
     }
 
     /// Number of cells (product of the axis cell counts).

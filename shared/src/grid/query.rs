@@ -7,6 +7,7 @@
 use glam::{Quat, Vec3};
 
 use super::axis::{Interp, Located, Wrap, axis_param, locate, nearest_in_cell, to_cell_units};
+use super::cost;
 use super::general::{AxisWeights, Cubic, Plan, cubic_position_weights};
 use super::lanes::WIDE;
 use super::trilinear::Trilinear;
@@ -16,7 +17,7 @@ use crate::pose::Pose;
 
 /// Cells per axis whose distances [`Grid::project`] works out once per
 /// projection.
-const PROJECT_CACHE: usize = 16;
+const PROJECT_CACHE: usize = cost::CACHED as usize;
 
 /// How one axis of a located query interpolates.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -80,6 +81,8 @@ pub struct Query {
     axis_count: usize,
     params: [f32; MAX_AXES],
     adjust: Adjust,
+    /// The work of its projection ([`cost::project`]), 0 without one.
+    projected: u32,
 }
 
 /// The window of a query: the indices of its samples (axis 0 fastest) and
@@ -195,15 +198,18 @@ impl<'a> Grid<'a> {
         for ((l, &ui), axis) in loc.iter_mut().zip(&u).zip(self.axes()) {
             *l = locate(axis, ui);
         }
+        let mut projected = 0;
         if !self.cell_valid(self.cell_index(&loc) as usize) {
-            let (moved, d2) = self.project(&u)?;
+            let (moved, d2, scanned) = self.project(&u)?;
             loc = moved;
+            projected = cost::project(self, scanned);
             // On the boundary of a valid cell: not a projection.
             if d2 > 0.0 {
                 adjust = Adjust::Projected;
             }
         }
         self.build_query(&loc, adjust, q);
+        q.projected = projected;
         Ok(())
     }
 
@@ -263,8 +269,12 @@ impl<'a> Grid<'a> {
     /// the other axes: a cell costs its mask bit and a sum, not a division
     /// and a distance per axis, and a row whose other axes alone are as far
     /// as the best cell so far is skipped. A projection runs on every frame
-    /// whose parameters leave the table's data.
-    fn project(&self, u: &[f32; MAX_AXES]) -> Result<([Located; MAX_AXES], f32), GridError> {
+    /// whose parameters leave the table's data. Also returns what it
+    /// scanned (for its work, [`cost::project`]).
+    fn project(
+        &self,
+        u: &[f32; MAX_AXES],
+    ) -> Result<([Located; MAX_AXES], f32, cost::Scan), GridError> {
         let axes = self.axes();
         let along = |a: usize, k: u32| match (axes.get(a), u.get(a)) {
             (Some(axis), Some(&ui)) => {
@@ -294,6 +304,8 @@ impl<'a> Grid<'a> {
         let row0 = cache.first().map_or(&[][..], |r| &r[..]);
         let mut best: Option<(f32, u32)> = None;
         let mut row = 0u32;
+        let mut scanned = 0u32;
+        let mut valid = 0u32;
         while row < self.cells {
             let outer = sq.get(1..used).unwrap_or(&[]);
             // No cell of the row is nearer than the row's other axes (a
@@ -307,11 +319,13 @@ impl<'a> Grid<'a> {
             }
             // Every cell of the row is below `cells`, a multiple of its
             // length.
+            scanned = scanned.saturating_add(1);
             for k in 0..row_len {
                 let c = row.wrapping_add(k);
                 if !self.cell_valid(c as usize) {
                     continue;
                 }
+                valid = valid.saturating_add(1);
                 let d0 = match row0.get(k as usize) {
                     Some(&d) => d,
                     None => along(0, k),
@@ -336,7 +350,14 @@ impl<'a> Grid<'a> {
             let (_, t) = nearest_in_cell(axis, ui, k);
             *l = Located { cell: k, t };
         }
-        Ok((loc, d2))
+        Ok((
+            loc,
+            d2,
+            cost::Scan {
+                rows: scanned,
+                valid,
+            },
+        ))
     }
 
     /// Turns the odometer of [`Grid::project`] to the next row: the first
@@ -461,11 +482,37 @@ impl Default for Query {
             axis_count: 0,
             params: [0.0; MAX_AXES],
             adjust: Adjust::None,
+            projected: 0,
         }
     }
 }
 
 impl Query {
+    /// The work of this query and of posing `segments` segments from it,
+    /// in instructions of the firmware's Cortex-M4F build by the
+    /// synthesis's cost model ([`cost`](super::cost)): locating it, the
+    /// projection it took if any, and its window read and blended for
+    /// every segment.
+    #[must_use]
+    pub fn work(&self, segments: usize) -> u32 {
+        let mut widths = [0usize; MAX_AXES];
+        for (w, a) in widths.iter_mut().zip(self.used_axes()) {
+            *w = a.width();
+        }
+        let widths = widths.get(..self.axis_count).unwrap_or(&[]);
+        let pose = cost::pose(widths, segments);
+        cost::locate(self.axis_count)
+            .saturating_add(self.projected)
+            .saturating_add(pose)
+    }
+
+    /// The work of the projection the query took, 0 if it took none: its
+    /// [`Query::work`] less its grid's [`Grid::plain_work`].
+    #[must_use]
+    pub fn projection_work(&self) -> u32 {
+        self.projected
+    }
+
     /// What the query did to its parameters.
     #[must_use]
     pub fn adjust(&self) -> Adjust {
@@ -669,7 +716,21 @@ mod tests {
                 // Anywhere from a cell before the axis to one after it.
                 *ui = (next() % 10_000) as f32 / 10_000.0 * (axis.count as f32 + 2.0) - 1.0;
             }
-            let fast = g.project(&u).ok();
+            let fast = g.project(&u).ok().map(|(l, d, _)| (l, d));
+            // A query's count is its grid's plain work and its
+            // projection's, which is none without a mask.
+            let mut params = [0.0f32; MAX_AXES];
+            for ((p, &ui), axis) in params.iter_mut().zip(&u).zip(g.axes()) {
+                *p = axis.min + ui * axis.step;
+            }
+            let params = &params[..axis_count];
+            if let Ok(q) = g.query(params) {
+                assert_eq!(q.work(13), g.plain_work(13) + q.projection_work());
+            }
+            let open = Grid::new(&axes[..axis_count], None).unwrap();
+            let q = open.query(params).unwrap();
+            assert_eq!(q.projection_work(), 0);
+            assert_eq!(q.work(13), open.plain_work(13));
             let slow = project_slow(&g, &u);
             match (fast, slow) {
                 (None, None) => {}
