@@ -18,6 +18,7 @@ use marionette_core::wire::TrackerFrame;
 use marionette_host::cmd::{demo, record, sim};
 use marionette_host::import::csv::read_tracker_csv;
 use marionette_host::perform::Framing;
+use marionette_host::period::Period;
 use marionette_host::{icount, perform, qemu};
 use std::path::PathBuf;
 
@@ -582,5 +583,50 @@ fn the_budget_sweep_around_the_period() {
             let least = if k < uniform.len() { 0.88 } else { 0.8 };
             assert!(within(1e-4) as f64 >= least * n, "{budget:?}");
         }
+    }
+}
+
+/// What `build` says of a table (`marionette_host::period`) and what
+/// `sim` counts (`Run::short_frames`) agree with the loop, natively: the
+/// shipped and two-axis tables keep the period on every frame, the finer
+/// one on its plain frames (its projections may not), the Catmull-Rom
+/// one on none.
+#[test]
+fn build_and_sim_say_which_frames_may_run_over() {
+    let mut all = vec![("the shipped table", inputs())];
+    for (name, blob) in tables() {
+        all.push((name, inputs_with(&blob)));
+    }
+    for (name, inputs) in &all {
+        let period = Period::of(&inputs.region).unwrap();
+        let run = perform::simulate(&inputs.region, &inputs.session).unwrap();
+        let steps = native(&inputs.region, &inputs.session, None);
+        // The verdict counts what the loop counts on a plain frame.
+        for s in steps.iter().filter(|s| !s.synthesis.adjusted) {
+            assert_eq!(s.synthesis.work, period.synthesis_instructions, "{name}");
+        }
+        let projected = steps
+            .iter()
+            .filter(|s| s.synthesis.work > period.synthesis_instructions)
+            .count();
+        let short = run.short_frames as usize;
+        println!(
+            "{name}: {}; {short} of {} frames may run over ({projected} projected)",
+            period.text(),
+            steps.len()
+        );
+        assert_eq!(short, steps.last().unwrap().short_frames as usize);
+        if period.keeps_period {
+            // Only a projection can leave a frame short.
+            assert!(short <= projected, "{name}");
+        } else {
+            assert_eq!(short, steps.len(), "{name}");
+        }
+        let expected = match *name {
+            "the shipped table" | "a two-axis table" => (true, false),
+            "a finer table (8 × 18 × 12 samples)" => (true, true),
+            _ => (false, true),
+        };
+        assert_eq!((period.keeps_period, short > 0), expected, "{name}");
     }
 }

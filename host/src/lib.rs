@@ -18,6 +18,7 @@ pub mod link;
 pub mod live;
 pub mod locate;
 pub mod perform;
+pub mod period;
 pub mod progress;
 pub mod qemu;
 pub mod refusal;

@@ -324,6 +324,11 @@ pub struct Run {
     /// How the emulated board stopped on a fault (a non-zero exit status,
     /// a reset), if it did; `None` for a clean end or a native run.
     pub fault: Option<String>,
+    /// Tracker frames whose reserve left the solver less than it needs at
+    /// the rig's period ([`marionette_core::frame::Pipeline::short_frames`]):
+    /// on the board they may run over it (see [`crate::period`]). Counted
+    /// by a native run (0 for an emulated one).
+    pub short_frames: u32,
 }
 
 /// Runs a session natively through the core.
@@ -443,6 +448,7 @@ fn replay(
             observe,
         );
     }
+    run.short_frames = performer.pipeline().map_or(0, |p| p.short_frames());
     Ok((run, outputs))
 }
 
@@ -922,6 +928,7 @@ pub fn emulate_watched(
             replies,
             board_stack: crate::icount::stack_bytes(&out.console),
             fault,
+            short_frames: 0,
         },
         out.servo,
     ))

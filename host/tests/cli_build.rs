@@ -423,3 +423,58 @@ fn tiny_motion_table_from_mocap() {
         "{hips:?}"
     );
 }
+
+/// The shipped reach spec (humanoid16), its paths made absolute, with
+/// `edit` applied, written into `dir`.
+fn reach_spec(dir: &Path, edit: impl Fn(&str) -> String) -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .canonicalize()
+        .unwrap();
+    let text = std::fs::read_to_string(root.join("data/builds/reach_humanoid16.toml")).unwrap();
+    let text = edit(&text)
+        .replace("\"../../", &format!("\"{}/", root.display()))
+        .replace("\"../", &format!("\"{}/data/", root.display()));
+    let path = dir.join("reach.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn build_says_whether_the_rig_keeps_its_period_with_the_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let blob = dir.path().join("t.bin");
+    let deadline = |spec: &Path| {
+        let args = ["build", s(spec), "-o", s(&blob), "--quiet", "--json"];
+        let out = marionette(&args);
+        assert!(out.status.success(), "{args:?}");
+        let doc: Value = serde_json::from_slice(&out.stdout).unwrap();
+        let stderr = String::from_utf8(out.stderr).unwrap();
+        (doc["build"]["deadline"].clone(), stderr)
+    };
+    // The shipped table keeps the 1 kHz period: the solver is left at
+    // least its floor, and nothing is said on stderr.
+    let (d, stderr) = deadline(&reach_spec(dir.path(), str::to_owned));
+    let contract = [
+        "period_us",
+        "synthesis_instructions",
+        "sensors",
+        "solver_left",
+        "solver_floor",
+        "keeps_period",
+    ];
+    assert_eq!(keys(&d), contract.into_iter().collect());
+    assert_eq!(d["period_us"], 1000);
+    assert_eq!(d["sensors"], 3);
+    assert_eq!(d["keeps_period"], true);
+    assert!(d["solver_left"].as_u64() >= d["solver_floor"].as_u64());
+    assert!(!stderr.contains("warning: with this table"), "{stderr}");
+    // One Catmull-Rom axis: a window of 16 samples for each of 13
+    // segments, which leaves the solver nothing at 1 kHz.
+    let cubic = |t: &str| t.replacen("count = 4\n", "count = 4\ncubic = true\n", 1);
+    let (d, stderr) = deadline(&reach_spec(dir.path(), cubic));
+    assert_eq!(d["keeps_period"], false);
+    assert!(d["solver_left"].as_u64() < d["solver_floor"].as_u64());
+    assert!(stderr.contains("warning: with this table"), "{stderr}");
+    assert!(stderr.contains("1000 µs period"), "{stderr}");
+}

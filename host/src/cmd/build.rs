@@ -2,6 +2,12 @@
 //! JSON example set (see [`crate::build`]), print what was measured, and
 //! optionally measure held-out error (`--holdout CLIP|all`).
 //!
+//! With a rig file, it says what the live loop's deadline leaves the
+//! solver with this table at the rig's frame period (a `deadline` line;
+//! `deadline` in `--json`: `period_us`, `synthesis_instructions`,
+//! `sensors`, `solver_left`, `solver_floor`, `keeps_period`; see
+//! [`crate::period`]), and warns when the rig's frames would run over it.
+//!
 //! A looping clip table reports each clip's seam (a `seam` line; `seams` in
 //! `--json`: `clip`, `given` and `chosen` cut `[first, last]`, `search`,
 //! `window`, `jump_given_m`, `jump_chosen_m`, `step_m`; see
@@ -146,13 +152,26 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         save(out, &built.blob, &inputs)?;
         progress.finish();
         let total = start.elapsed().as_secs_f64();
+        let period = deadline(&spec, &built.blob);
         if args.json {
             let mut doc = build_json(&built, &data, out, total);
             doc["boards"] = fits_json(&fits);
+            if let Some(p) = &period {
+                doc["deadline"] = serde_json::to_value(p)?;
+            }
             report.insert("build".into(), doc);
         } else {
             print!("{}", build_text(&args.spec, out, &built, &data, total));
             print!("{}", fits_text(&fits));
+            if let Some(p) = &period {
+                println!("  {}", p.text());
+            }
+        }
+        if let Some(p) = period.filter(|p| !p.keeps_period) {
+            eprintln!(
+                "warning: with this table the rig's frames leave the solver {} instructions, less than the {} it needs: on the board they run over the rig's {} µs period (a coarser or linear table, or a longer frame_period_us)",
+                p.solver_left, p.solver_floor, p.period_us
+            );
         }
     }
     if let Some(which) = &args.holdout {
@@ -181,6 +200,14 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         println!("{}", serde_json::to_string_pretty(&report)?);
     }
     Ok(())
+}
+
+/// What the deadline leaves the spec's rig with the table `blob`
+/// ([`crate::period`]); `None` without a rig file.
+fn deadline(spec: &spec::Spec, blob: &[u8]) -> Option<crate::period::Period> {
+    let rig = crate::rigfile::load(spec.rig.file.as_ref()?).ok()?;
+    let rig_blob = crate::rigfile::to_blob(&rig).ok()?;
+    crate::period::Period::of(&crate::perform::region(&rig_blob, Some(blob)))
 }
 
 fn read_spec(path: &std::path::Path) -> Result<spec::Spec, CmdError> {

@@ -488,6 +488,9 @@ pub struct Summary {
     pub adjusted_frames: u32,
     /// Frames dropped because synthesis or solving failed (native).
     pub failed_frames: u32,
+    /// Tracker frames that may run over the rig's period on the board,
+    /// by the native replay ([`crate::perform::Run::short_frames`]).
+    pub short_frames: u32,
     /// Median right-hand goal residual over the board's telemetry, mm.
     pub hand_residual_mm: f64,
     /// Per servo.
@@ -773,6 +776,7 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         errors,
         adjusted_frames: native.adjusted,
         failed_frames: native.failed,
+        short_frames: emulated.short_frames,
         hand_residual_mm,
         servos: servo_ranges(rig, &board),
         files,
@@ -783,6 +787,10 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
         print!("{}", text(&summary, inputs.period_us));
+        let short = crate::period::note(summary.short_frames, summary.frames_in, &inputs.region);
+        if let Some(note) = short {
+            eprintln!("{note}");
+        }
     }
     if summary.mismatches > 0 {
         return Err("the emulated board's servo output differs from the native core".into());

@@ -84,6 +84,9 @@ pub struct Summary {
     pub seconds: f64,
     /// Whether the board armed, and if not why (see [`crate::refusal`]).
     pub board: BoardReport,
+    /// Tracker frames that may run over the rig's period on the board, by
+    /// the native replay ([`perform::Run::short_frames`]).
+    pub short_frames: u32,
 }
 
 /// What [`compare`] found.
@@ -187,6 +190,7 @@ pub fn compare_watched(
         servo_csv: csv,
         seconds: start.elapsed().as_secs_f64(),
         board: stop.as_ref().map_or_else(BoardReport::armed, Stop::report),
+        short_frames: native.short_frames,
     };
     Ok(Compared {
         run: board,
@@ -260,6 +264,10 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
             summary.servo_csv.as_deref().unwrap_or("-"),
             summary.seconds
         );
+        let short = crate::period::note(summary.short_frames, summary.frames, &inputs.region);
+        if let Some(note) = short {
+            eprintln!("{note}");
+        }
     }
     if let Some(stop) = stop {
         return Err(Box::new(stop));

@@ -62,6 +62,9 @@ pub struct Summary {
     /// Boards that would refuse this rig, with why (the native loop does
     /// not model a board's back-ends or capacity).
     pub boards_refusing: Vec<String>,
+    /// Tracker frames that may run over the rig's period on the board
+    /// ([`perform::Run::short_frames`]).
+    pub short_frames: u32,
 }
 
 /// The inputs of a performance, loaded.
@@ -215,6 +218,7 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         servo_csv: stop.is_none().then(|| csv.display().to_string()),
         board: stop.as_ref().map_or_else(BoardReport::armed, Stop::report),
         boards_refusing: boards_refusing(&inputs.region),
+        short_frames: run.short_frames,
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
@@ -229,6 +233,10 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         );
         for why in &summary.boards_refusing {
             eprintln!("note: a board would refuse this rig: {why}");
+        }
+        let short = crate::period::note(run.short_frames, inputs.frames, &inputs.region);
+        if let Some(note) = short {
+            eprintln!("{note}");
         }
     }
     match stop {

@@ -608,6 +608,24 @@ impl<'a, const N: usize> Rig<'a, N> {
         self.goals.as_slice()
     }
 
+    /// The sensors the rig reads, one bit per sensor id (bit `id`): its
+    /// parameter entries' and sensor goals', and the sensors they are read
+    /// relative to.
+    #[must_use]
+    pub fn sensors_read(&self) -> u16 {
+        let bit = |id: u8| 1u16.checked_shl(u32::from(id)).unwrap_or(0);
+        let frame = |f: RefFrame| match f {
+            RefFrame::Sensor(id) => bit(id),
+            _ => 0,
+        };
+        let params = self.params.iter().map(|m| bit(m.sensor) | frame(m.frame));
+        let goals = self.goals.iter().map(|g| match g.target {
+            GoalSource::Sensor(s) => bit(s.sensor) | frame(s.source),
+            _ => 0,
+        });
+        params.chain(goals).fold(0, |all, b| all | b)
+    }
+
     /// The number of goals [`Rig::map_sensors`] writes (an entry with an
     /// orientation weight writes two).
     #[must_use]
