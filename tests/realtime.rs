@@ -324,7 +324,23 @@ fn cases() -> Vec<Case> {
             received: RECORDED,
         });
     }
+    cases.push(Case {
+        name: "the layered demo (`demo --layers`: walk and reach)".into(),
+        inputs: layered(),
+        received: RECORDED,
+    });
     cases
+}
+
+/// The inputs of `demo --layers`: the recording on the walk and reach
+/// layers.
+fn layered() -> sim::Inputs {
+    let reach = demo::build_table(&repo().join("data/builds/reach_humanoid16.toml")).unwrap();
+    let walk = demo::build_table(&repo().join("data/builds/walk_humanoid16.toml")).unwrap();
+    let rig = repo().join("rigs/humanoid16.toml");
+    let mut inputs = inputs_with(&reach.blob);
+    demo::make_layered(&mut inputs, &rig, &reach.blob, &walk.blob).unwrap();
+    inputs
 }
 
 /// Tables the shipped one's reserve was not measured on, built from its

@@ -122,8 +122,9 @@ pub const RESERVE_ADJUSTED: u32 = 1_910;
 
 /// Instructions per segment of each layer of a layered rig besides its
 /// synthesis's counted work: its pose made local and blended over the
-/// others (`crate::layer`).
-pub const LAYER_PER_SEGMENT: u32 = 600;
+/// others (`crate::layer`); at least the worst of `demo --layers`'s frames
+/// (two layers), which `tests/realtime.rs` replays.
+pub const LAYER_PER_SEGMENT: u32 = 1_000;
 
 /// The floor of a plain frame's budget, for a rig whose period is too
 /// short: when a plain frame's period less its reserve is below this, its
