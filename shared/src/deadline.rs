@@ -92,11 +92,11 @@ pub const CLOCK_HZ: u32 = 100_000_000;
 
 /// Cycles per instruction the budget assumes, in hundredths: the realistic
 /// model of the project's cycle estimator (`../shared/tools/cycles`:
-/// Cortex-M4 timings, 3 flash wait states and the ART accelerator) gives
-/// 1.37 to 1.73 per stage of the live loop and 1.65 to 1.68 for a whole
-/// frame (the mean, the worst and the cold one; README, "Real time"): the
-/// largest, rounded up. It does not model interrupts or bus contention: a
-/// board's DWT counts (`Telemetry`'s timing) settle it.
+/// Cortex-M4 timings, 3 flash wait states and the ART accelerator): the
+/// largest figure it has given for a whole frame (the mean, the worst or
+/// the cold one; README, "Real time"), rounded up. It does not model
+/// interrupts or bus contention: a board's DWT counts (`Telemetry`'s
+/// timing) settle it.
 pub const CPI_PERCENT: u32 = 168;
 
 /// Instructions of the stages around the solver that grow neither with

@@ -38,10 +38,12 @@
 //! per quad, one per pair).
 //!
 //! The coefficients are upper bounds of the instructions measured on the
-//! emulated board: `tests/realtime.rs` replays sessions on tables of each
-//! kind (the shipped trilinear grid, a finer one, one to three Catmull-Rom
-//! axes) and checks that each frame's count bounds its synthesis and stays
-//! within a margin of it.
+//! emulated board, fitted with the deadline's reserve
+//! ([`crate::deadline`]): `tests/realtime.rs` replays sessions on tables of
+//! each kind (the shipped trilinear grid, a finer one whose projections
+//! scan many cells, a two-axis one on the general tree, one with a
+//! Catmull-Rom axis, and two layers) and checks that on every frame the
+//! count and the reserve bound everything but the solver.
 
 use super::{Grid, MAX_AXES};
 
