@@ -7,17 +7,18 @@
 //! whose synthesis leaves the solver less than the least it needs
 //! ([`deadline::MIN_SOLVE_BUDGET`]) gets that least anyway, and its frames
 //! run over the period on the board. `marionette build` says so when it
-//! writes such a table, and `sim`, `emulate` and `demo` count the frames of
-//! a session that may run over ([`crate::perform::Run::short_frames`]).
+//! writes such a table, `inspect BLOB --rig RIG` for a table and rig, and
+//! `sim`, `emulate` and `demo` count the frames of a session that may run
+//! over ([`crate::perform::Run::short_frames`]).
 
 use marionette_core::deadline::{self, Received};
 use marionette_core::frame::Region;
 use marionette_core::perform::Performer;
 use marionette_core::solve::SolverState;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// What the deadline leaves a rig's plain frames with its table.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Period {
     /// The rig's frame period, µs.
     pub period_us: u32,

@@ -207,6 +207,12 @@ fn inspect_says_whether_a_rig_and_a_table_arm_together() {
     let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(doc["arming"]["arms"], true);
     assert_eq!(doc["arming"]["boards"][1]["arms"], true, "{doc}");
+    // A one-axis linear grid leaves the 1 kHz rig's solver more than its
+    // floor: its plain frames keep the period.
+    let deadline = &doc["arming"]["deadline"];
+    assert_eq!(deadline["period_us"], 1000, "{doc}");
+    assert_eq!(deadline["keeps_period"], true, "{doc}");
+    assert!(deadline["solver_left"].as_u64() >= deadline["solver_floor"].as_u64());
     // Another rig (a longer shin): the hashes differ, named.
     let other = dir.path().join("other.toml");
     std::fs::write(&other, text.replacen("-0.18, 0.0]", "-0.2, 0.0]", 1)).unwrap();

@@ -43,7 +43,9 @@ pub struct Args {
 /// Whether a rig and a table arm the boards together, as JSON: `rig`
 /// (file), `rig_hash`, `table_rig_hash`, `arms` (the core's check, as the
 /// firmware runs it), `reason`, `explanation`, `detail`, `advice`,
-/// `boards` (`board`, `arms`, `reason`, `detail`, `region_bytes`); and the
+/// `boards` (`board`, `arms`, `reason`, `detail`, `region_bytes`),
+/// `deadline` (what the rig's period leaves the solver with this table,
+/// [`crate::period::Period`]; null when the core would not arm); and the
 /// refusal when the core would not arm, or no board would.
 pub fn arming(
     rig_path: &Path,
@@ -104,6 +106,7 @@ pub fn arming(
         "detail": refusal::detail(reason, &region, None),
         "advice": if reason == StatusReason::Ok { "" } else { advice },
         "boards": boards,
+        "deadline": crate::period::Period::of(&region),
     });
     Ok((doc, stop))
 }
@@ -245,6 +248,11 @@ fn arming_text(a: &serde_json::Value) -> String {
     );
     if a["arms"] == true {
         let _ = writeln!(s, "  rig + table: Ok (the core arms)");
+        let period: Option<crate::period::Period> =
+            serde_json::from_value(a["deadline"].clone()).ok();
+        if let Some(p) = period {
+            let _ = writeln!(s, "  {}", p.text());
+        }
     } else {
         let detail = a["detail"]
             .as_str()
