@@ -405,8 +405,11 @@ fn every_frame_keeps_the_solvers_budget_on_the_emulated_board() {
                 }
                 // Everything but the solver's counted work fits the reserve,
                 // so a frame takes at most the reserve and the solver's
-                // budget.
-                let rest = m.total - f64::from(work);
+                // budget. A count of instructions is a whole number: the
+                // timer's ticks / 3.2 read it to within a tick (5/16 of an
+                // instruction), so it is compared rounded.
+                let total = m.total.round();
+                let rest = total - f64::from(work);
                 assert!(
                     rest <= f64::from(reserve),
                     "{}, frame {}: {rest:.0} instructions besides the solver's {work}, reserve {}",
@@ -416,16 +419,16 @@ fn every_frame_keeps_the_solvers_budget_on_the_emulated_board() {
                 );
                 rest_worst[kind] = rest_worst[kind].max(rest);
                 least[kind] = least[kind].min(f64::from(reserve) / rest);
-                worst = worst.max(m.total);
+                worst = worst.max(total);
                 let bound = reserve + c.solve.budget;
                 assert!(
-                    m.total <= f64::from(bound),
+                    total <= f64::from(bound),
                     "{}, frame {}: {:.0} instructions, bound {bound}",
                     case.name,
                     m.seq,
                     m.total
                 );
-                if m.total > f64::from(frame) {
+                if total > f64::from(frame) {
                     over += 1;
                     // With the loop's own budget, only a frame whose
                     // reserve leaves the solver less than it needs runs
@@ -545,6 +548,7 @@ fn the_budget_sweep_around_the_period() {
         25_000,
         26_000,
         26_500,
+        deadline::MIN_SOLVE_BUDGET - 1,
         deadline::MIN_SOLVE_BUDGET,
         27_000,
         27_500,
@@ -588,7 +592,7 @@ fn the_budget_sweep_around_the_period() {
             assert!(within(1e-4) >= last_within, "{budget:?}");
             last_within = within(1e-4);
         }
-        if budget.get(plain, RECORDED) <= 26_500 {
+        if budget.get(plain, RECORDED) < deadline::MIN_SOLVE_BUDGET {
             assert_eq!(iterated, 0, "{budget:?}");
         }
         // From the floor up, one factorisation pass a frame (the solver's
@@ -604,9 +608,8 @@ fn the_budget_sweep_around_the_period() {
 
 /// What `build` says of a table (`marionette_host::period`) and what
 /// `sim` counts (`Run::short_frames`) agree with the loop, natively: the
-/// shipped and two-axis tables keep the period on every frame, the finer
-/// one on its plain frames (its projections may not), the Catmull-Rom
-/// one on none.
+/// shipped, finer and two-axis tables keep the period on every frame, the
+/// Catmull-Rom one on none.
 #[test]
 fn build_and_sim_say_which_frames_may_run_over() {
     let mut all = vec![("the shipped table", inputs())];
@@ -640,7 +643,7 @@ fn build_and_sim_say_which_frames_may_run_over() {
         }
         let expected = match *name {
             "the shipped table" | "a two-axis table" => (true, false),
-            "a finer table (8 × 18 × 12 samples)" => (true, true),
+            "a finer table (8 × 18 × 12 samples)" => (true, false),
             _ => (false, true),
         };
         assert_eq!((period.keeps_period, short > 0), expected, "{name}");

@@ -62,7 +62,7 @@
 
 use glam::{Quat, Vec3};
 
-use crate::grid::{Adjust, Grid, GridError, MAX_AXES, Samples, Wrap};
+use crate::grid::{Adjust, Grid, GridError, MAX_AXES, Query, Samples, Wrap};
 use crate::math::{self, SlerpWeight};
 use crate::pose::Pose;
 
@@ -159,6 +159,9 @@ pub struct Motion {
     looping: bool,
     adjust: Adjust,
     travel: Vec3,
+    /// The parameter query's work ([`crate::grid::Query::work`], no
+    /// segments).
+    work: u32,
 }
 
 impl<'a> Clips<'a> {
@@ -217,6 +220,7 @@ impl<'a> Clips<'a> {
             looping: self.looping,
             adjust: q.adjust(),
             travel: Vec3::ZERO,
+            work: q.work(0),
         };
         for (d, &p) in m.params.iter_mut().zip(q.params()) {
             *d = p;
@@ -256,6 +260,18 @@ impl<'a> Clips<'a> {
         phase: f32,
         out: &mut Pose<N>,
     ) -> Result<Adjust, ClipError> {
+        self.pose_into(motion, samples, phase, (&mut Query::default(), out))
+    }
+
+    /// [`Clips::pose`] through an existing [`Query`], which keeps the
+    /// phase query (for its [`Query::work`]).
+    pub fn pose_into<S: Samples, const N: usize>(
+        &self,
+        motion: &Motion,
+        samples: &S,
+        phase: f32,
+        (query, out): (&mut Query, &mut Pose<N>),
+    ) -> Result<Adjust, ClipError> {
         if !phase.is_finite() {
             return Err(ClipError::Time);
         }
@@ -266,10 +282,9 @@ impl<'a> Clips<'a> {
         }
         let slot = all.get_mut(n).ok_or(ClipError::Layout)?;
         *slot = phase;
-        let adjust = self
-            .grid
-            .synthesize(samples, all.get(..=n).unwrap_or(&[]), out)?;
-        Ok(adjust)
+        self.grid.query_into(all.get(..=n).unwrap_or(&[]), query)?;
+        query.pose(samples, out)?;
+        Ok(query.adjust())
     }
 
     /// The pose of `motion` at `time` seconds (see [`Motion::phase_at`]).
@@ -297,6 +312,13 @@ impl Motion {
     #[must_use]
     pub fn adjust(&self) -> Adjust {
         self.adjust
+    }
+
+    /// The parameter query's work ([`Query::work`] without segments: its
+    /// location and projection; the durations' blend is not counted).
+    #[must_use]
+    pub fn work(&self) -> u32 {
+        self.work
     }
 
     /// Whether the motion loops (one cycle, phase in `[0, 1)`).
@@ -547,6 +569,7 @@ mod tests {
             looping: false,
             adjust: Adjust::None,
             travel: Vec3::ZERO,
+            work: 0,
         };
         assert_eq!(m.duration(), 4.0);
         assert_eq!(m.phase_at(0.5), Ok(0.5));

@@ -345,10 +345,11 @@ fn layer_pose<const N: usize>(
             let clips = Clips::new(grid, table.param_grid().ok()?, usize::from(phases)).ok()?;
             let motion = clips.motion(table, params).ok()?;
             let phase = state.playhead.advance(&motion, dt);
-            clips.pose(&motion, table, phase, out).ok()?;
-            // A clip's pose query inside its valid cells (its projection,
-            // if it takes one, is not counted).
-            Some((motion.adjust(), grid.plain_work(out.count)))
+            clips
+                .pose_into(&motion, table, phase, (&mut *query, &mut *out))
+                .ok()?;
+            let work = motion.work().saturating_add(query.work(out.count));
+            Some((motion.adjust(), work))
         }
     }
 }
@@ -977,8 +978,8 @@ impl<'r, 'a, const N: usize> Pipeline<'r, 'a, N> {
     fn solve(&mut self) -> bool {
         let body: Body<'_> = self.rig.body();
         self.warm.start(&body, &self.goals, &mut self.angles);
-        let budget = self.budget.get(self.synthesized, self.received);
-        if self.budget.may_overrun(self.synthesized, self.received) {
+        let (budget, short) = self.budget.decide(self.synthesized, self.received);
+        if short {
             self.short_frames = self.short_frames.saturating_add(1);
         }
         match solve::solve_into(

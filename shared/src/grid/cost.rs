@@ -17,8 +17,8 @@
 //! work = QUERY_BASE + QUERY_PER_AXIS × axes
 //!      + projection, if it took one: PROJECT_BASE
 //!        + PROJECT_PER_DISTANCE × the per-axis distances it caches
-//!        + PROJECT_PER_ROW × rows
-//!        + PROJECT_PER_CELL × cells of the rows it scanned
+//!        + PROJECT_PER_ROW × rows it came to
+//!        + PROJECT_PER_CELL × cells it looked at
 //!        + PROJECT_PER_VALID × valid cells among them
 //!        (+ PROJECT_PER_DISTANCE per row or scanned cell whose distance
 //!         is beyond its cache, on an axis of more than 16 cells)
@@ -45,24 +45,26 @@
 //! Catmull-Rom axis, and two layers) and checks that on every frame the
 //! count and the reserve bound everything but the solver.
 
-use super::{Grid, MAX_AXES};
+use super::Grid;
 
 /// Locating a query besides its axes, and building it.
 pub const QUERY_BASE: u32 = 600;
 /// Locating and building one axis of a query (with a Catmull-Rom axis's
 /// neighbour checks).
 pub const QUERY_PER_AXIS: u32 = 260;
-/// A projection's fixed part.
-pub const PROJECT_BASE: u32 = 3_100;
+/// A projection's fixed part (with what a frame that took one costs
+/// besides, in the query and the stages after it).
+pub const PROJECT_BASE: u32 = 4_850;
 /// One distance from the query to a cell along one axis.
 pub const PROJECT_PER_DISTANCE: u32 = 15;
-/// One row of cells along axis 0: turning the odometer of the other axes
-/// and comparing its distance with the best so far.
-pub const PROJECT_PER_ROW: u32 = 100;
-/// One cell of a row the projection scans: its mask bit.
-pub const PROJECT_PER_CELL: u32 = 17;
-/// One valid cell of a scanned row: its distance and the comparison.
-pub const PROJECT_PER_VALID: u32 = 75;
+/// One row of cells along axis 0 the projection came to: turning the
+/// odometer of the other axes, bounding the row, starting its walk.
+pub const PROJECT_PER_ROW: u32 = 290;
+/// One cell of a row the projection looked at: the next of its walk, its
+/// distance and its mask bit.
+pub const PROJECT_PER_CELL: u32 = 40;
+/// One valid cell among them: the comparison with the best so far.
+pub const PROJECT_PER_VALID: u32 = 400;
 /// The unrolled trilinear tree's fixed part (its coefficients).
 pub const TRILINEAR_BASE: u32 = 1_900;
 /// The unrolled trilinear tree per segment (eight samples read, decoded
@@ -112,9 +114,11 @@ pub(super) const fn locate(axes: usize) -> u32 {
 /// What a projection scanned.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) struct Scan {
-    /// Rows of cells along axis 0 it scanned (those it did not skip).
+    /// Rows of cells along axis 0 it came to (scanned or bounded out).
     pub(super) rows: u32,
-    /// Valid cells in them (each a distance and a comparison).
+    /// Cells of those rows it looked at.
+    pub(super) cells: u32,
+    /// Valid cells among them (each a comparison with the best).
     pub(super) valid: u32,
 }
 
@@ -122,25 +126,22 @@ pub(super) struct Scan {
 #[must_use]
 pub(super) fn project(grid: &Grid<'_>, scan: Scan) -> u32 {
     let axes = grid.axes();
-    let cells = |a: usize| axes.get(a).map_or(1, |x| x.cells());
+    let wide = |a: &super::Axis| a.cells() > CACHED;
     let cached: u32 = axes.iter().map(|a| a.cells().min(CACHED)).sum();
-    let row_len = cells(0).max(1);
-    let rows = (grid.cell_count() as u32).checked_div(row_len).unwrap_or(0);
-    let wide = |a: usize| cells(a) > CACHED;
-    let per_row = if (1..axes.len().min(MAX_AXES)).any(wide) {
+    let per_row = if axes.iter().skip(1).any(wide) {
         PROJECT_PER_ROW + PROJECT_PER_DISTANCE
     } else {
         PROJECT_PER_ROW
     };
-    let per_cell = if wide(0) {
+    let per_cell = if axes.first().is_some_and(wide) {
         PROJECT_PER_CELL + PROJECT_PER_DISTANCE
     } else {
         PROJECT_PER_CELL
     };
     PROJECT_BASE
         .saturating_add(cached.saturating_mul(PROJECT_PER_DISTANCE))
-        .saturating_add(rows.saturating_mul(per_row))
-        .saturating_add(scan.rows.saturating_mul(row_len).saturating_mul(per_cell))
+        .saturating_add(scan.rows.saturating_mul(per_row))
+        .saturating_add(scan.cells.saturating_mul(per_cell))
         .saturating_add(scan.valid.saturating_mul(PROJECT_PER_VALID))
 }
 
