@@ -399,13 +399,14 @@ impl<'a> Grid<'a> {
             let Some(w) = walk.get_mut(a) else {
                 return false;
             };
-            while let Some(k) = w.next(|c| at(a, c)) {
+            if let Some(k) = w.next(|c| at(a, c)) {
                 let s = at(a, k);
                 let above = sq.get(a + 1..used).unwrap_or(&[]);
                 let bound = above.iter().fold(0.0f32 + s, |acc, x| acc + x);
                 if best.is_some_and(|(bd, _)| bound > bd) {
-                    // Every later cell of this axis is farther still.
-                    break;
+                    // Every later cell of this axis is farther still: on
+                    // to the next axis.
+                    continue;
                 }
                 if let (Some(dk), Some(ds)) = (digit.get_mut(a), sq.get_mut(a)) {
                     *dk = k;
