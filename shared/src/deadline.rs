@@ -74,9 +74,10 @@
 //! worst measured on the emulated board by `tests/realtime.rs` over the
 //! bundled recording sent compact and as `f32` frames, the same with a
 //! sensor the rig does not read, four other HDM05 clips recorded at
-//! 1 kHz, and the recording on three other tables (finer, two axes, a
-//! Catmull-Rom axis). That test also checks that the reserve bounds every
-//! frame's rest, that it is within 5 % of some frame's rest, plain and
+//! 1 kHz, the recording on three other tables (finer, two axes, a
+//! Catmull-Rom axis), and the layered demo. That test also checks that the
+//! reserve bounds every frame's rest, that it is within 5 % of some
+//! frame's rest, plain and
 //! adjusted, that the solver keeps its budget on every frame, that only
 //! the frames this module says may run over do, and that the goals still
 //! converge. When a stage gets faster, lower the reserve to its new worst
@@ -115,9 +116,8 @@ pub const RESERVE_BASE: u32 = 8_871;
 pub const RESERVE_PER_SEGMENT: u32 = 951;
 
 /// More instructions outside the synthesis's counted work in a frame
-/// whose synthesis had to clamp or project the parameters (its solve, which
-/// starts from farther, outruns the solver's count more; the worst rest of
-/// such a frame `tests/realtime.rs` measures, the same rule as
+/// whose synthesis had to clamp or project the parameters (the worst rest
+/// of such a frame `tests/realtime.rs` measures, the same rule as
 /// [`RESERVE_PER_SEGMENT`]).
 pub const RESERVE_ADJUSTED: u32 = 60;
 
