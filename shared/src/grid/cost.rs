@@ -43,7 +43,13 @@
 //! each kind (the shipped trilinear grid, a finer one whose projections
 //! scan many cells, a two-axis one on the general tree, one with a
 //! Catmull-Rom axis, and two layers) and checks that on every frame the
-//! count and the reserve bound everything but the solver.
+//! count and the reserve bound everything but the solver. The split
+//! between the trilinear tree's coefficients and the reserve's
+//! per-segment part is a fit, not a profile: only their sum is checked
+//! (a profile puts more of a frame in the tree, decoding the table's
+//! samples included, than `TRILINEAR_PER_SEGMENT` says, and less in the
+//! rest); the general tree's are fitted against the same reserve, so a
+//! table's count is right relative to the shipped one's.
 
 use super::Grid;
 
