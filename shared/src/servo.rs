@@ -172,6 +172,9 @@ pub struct Slew {
     low: u16,
     high: u16,
     limits: StepLimits,
+    /// The braking distance from the top speed under `limits`, worked out
+    /// when they are set (every frame compares with it).
+    top_stop: u64,
     position: u16,
     step: i32,
 }
@@ -182,17 +185,16 @@ impl Slew {
     #[must_use]
     pub fn new(low: u16, high: u16, limits: StepLimits, start: u16) -> Self {
         let (low, high) = (low.min(high), low.max(high));
-        let limits = StepLimits {
-            max_step: limits.max_step.max(1),
-            max_accel: limits.max_accel.max(1),
-        };
-        Self {
+        let mut slew = Self {
             low,
             high,
             limits,
+            top_stop: 0,
             position: start.max(low).min(high),
             step: 0,
-        }
+        };
+        slew.set_limits(limits);
+        slew
     }
 
     /// A limiter for a calibrated channel, starting at `start_us`.
@@ -213,6 +215,10 @@ impl Slew {
             max_step: limits.max_step.max(1),
             max_accel: limits.max_accel.max(1),
         };
+        self.top_stop = braking_distance(
+            u32::from(self.limits.max_step),
+            u32::from(self.limits.max_accel),
+        );
     }
 
     /// The limits in force.
@@ -263,7 +269,7 @@ impl Slew {
         let dist = target - here;
         // The fastest speed from which we can still stop within `dist`:
         // v² ≤ 2·a·d, in whole units per frame.
-        let brake = capped_stopping_speed(dist.unsigned_abs(), amax, vmax);
+        let brake = capped_stopping_speed(dist.unsigned_abs(), amax, vmax, self.top_stop);
         let wanted = dist.signum() * dist.abs().min(brake).min(vmax);
         let step = wanted
             .max(self.step - amax)
@@ -304,13 +310,13 @@ fn stopping_speed(dist: u32, accel: i32) -> i32 {
     v.min(i32::MAX as u32) as i32
 }
 
-/// `stopping_speed(dist, accel).min(vmax)` (`vmax ≥ 0`). When even the top
-/// speed stops in time the brake does not bind, and the exact stopping
-/// speed (at least `vmax` then: the braking distance grows with the speed)
-/// is not needed.
-fn capped_stopping_speed(dist: u32, accel: i32, vmax: i32) -> i32 {
-    let a = accel.max(1).unsigned_abs();
-    if braking_distance(vmax.unsigned_abs(), a) <= u64::from(dist) {
+/// `stopping_speed(dist, accel).min(vmax)` (`vmax ≥ 0`), given `top_stop`,
+/// the braking distance from `vmax` (`braking_distance(vmax, accel)`).
+/// When even the top speed stops in time the brake does not bind, and the
+/// exact stopping speed (at least `vmax` then: the braking distance grows
+/// with the speed) is not needed.
+fn capped_stopping_speed(dist: u32, accel: i32, vmax: i32, top_stop: u64) -> i32 {
+    if top_stop <= u64::from(dist) {
         vmax
     } else {
         stopping_speed(dist, accel).min(vmax)
@@ -410,8 +416,9 @@ mod tests {
         for accel in [1, 3, 40, 65_535] {
             for vmax in [0, 1, 2, 7, 100, 65_535] {
                 for dist in (0..2000).chain([65_535, 1 << 20]) {
+                    let top_stop = braking_distance(vmax as u32, accel as u32);
                     assert_eq!(
-                        capped_stopping_speed(dist, accel, vmax),
+                        capped_stopping_speed(dist, accel, vmax, top_stop),
                         stopping_speed(dist, accel).min(vmax),
                         "{dist} {accel} {vmax}"
                     );
