@@ -173,8 +173,10 @@ pub struct Slew {
     high: u16,
     limits: StepLimits,
     /// The braking distance from the top speed under `limits`, worked out
-    /// when they are set (every frame compares with it).
-    top_stop: u64,
+    /// when they are set (every frame compares with it). At most 65,536 ×
+    /// 65,535, so it fits 32 bits (saturated all the same: a larger value
+    /// only sends [`Slew::update`] to the exact search).
+    top_stop: u32,
     position: u16,
     step: i32,
 }
@@ -215,10 +217,11 @@ impl Slew {
             max_step: limits.max_step.max(1),
             max_accel: limits.max_accel.max(1),
         };
-        self.top_stop = braking_distance(
+        let top = braking_distance(
             u32::from(self.limits.max_step),
             u32::from(self.limits.max_accel),
         );
+        self.top_stop = u32::try_from(top).unwrap_or(u32::MAX);
     }
 
     /// The limits in force.
@@ -315,8 +318,8 @@ fn stopping_speed(dist: u32, accel: i32) -> i32 {
 /// When even the top speed stops in time the brake does not bind, and the
 /// exact stopping speed (at least `vmax` then: the braking distance grows
 /// with the speed) is not needed.
-fn capped_stopping_speed(dist: u32, accel: i32, vmax: i32, top_stop: u64) -> i32 {
-    if top_stop <= u64::from(dist) {
+fn capped_stopping_speed(dist: u32, accel: i32, vmax: i32, top_stop: u32) -> i32 {
+    if top_stop <= dist {
         vmax
     } else {
         stopping_speed(dist, accel).min(vmax)
@@ -416,7 +419,8 @@ mod tests {
         for accel in [1, 3, 40, 65_535] {
             for vmax in [0, 1, 2, 7, 100, 65_535] {
                 for dist in (0..2000).chain([65_535, 1 << 20]) {
-                    let top_stop = braking_distance(vmax as u32, accel as u32);
+                    let top = braking_distance(vmax as u32, accel as u32);
+                    let top_stop = u32::try_from(top).unwrap_or(u32::MAX);
                     assert_eq!(
                         capped_stopping_speed(dist, accel, vmax, top_stop),
                         stopping_speed(dist, accel).min(vmax),
