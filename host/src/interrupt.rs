@@ -1,5 +1,6 @@
 //! Ctrl-C for the commands that run until told to stop (`live`, and
-//! `stream` on a long recording): one handler for all of them.
+//! `stream` and `replay --port` on a long recording): one handler for all
+//! of them.
 //!
 //! [`stop_on_ctrl_c`] installs it (SIGINT, and SIGTERM and SIGHUP too). The
 //! first signal sets the stop flag it returns and says on stderr that the

@@ -12,7 +12,7 @@ use std::process::ExitCode;
     about,
     after_help = "Exit codes: 0 success; 1 error (bad input, I/O, board and native core disagree); \
                   2 bad command line; 3 the board never armed (its Status reason is printed); \
-                  4 the board stopped on a fault; 130 a second Ctrl-C quit `live` or `stream` at once.\n\
+                  4 the board stopped on a fault; 130 a second Ctrl-C quit `live`, `stream` or `replay --port` at once.\n\
                   File formats (goals, build spec, example set, rig, recording): docs/README.md."
 )]
 struct Cli {

@@ -36,6 +36,7 @@ use marionette_core::wire::{
     PROTOCOL_VERSION, Sensor, TrackerFrame, Trip, WireError,
 };
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 /// Errors of a host-driven performance.
@@ -291,21 +292,42 @@ pub enum Pacing {
 pub fn pace<E>(
     session: &[Sent],
     pacing: Pacing,
-    mut send: impl FnMut(&[u8]) -> Result<(), E>,
+    send: impl FnMut(&[u8]) -> Result<(), E>,
 ) -> Result<(), E> {
+    pace_until(session, pacing, &AtomicBool::new(false), send).map(|_| ())
+}
+
+/// [`pace`] until `stop` is set (looked at before each message and every
+/// [`STOP_POLL`] while waiting for one): returns how many messages went,
+/// all of them unless it stopped.
+pub fn pace_until<E>(
+    session: &[Sent],
+    pacing: Pacing,
+    stop: &AtomicBool,
+    mut send: impl FnMut(&[u8]) -> Result<(), E>,
+) -> Result<usize, E> {
     let start = std::time::Instant::now();
     let first = session.first().map_or(0, |s| s.time_us);
-    for sent in session {
+    for (went, sent) in session.iter().enumerate() {
         if pacing == Pacing::RealTime {
             let due = Duration::from_micros(u64::from(sent.time_us.wrapping_sub(first)));
-            if let Some(wait) = due.checked_sub(start.elapsed()) {
-                std::thread::sleep(wait);
+            while let Some(wait) = due.checked_sub(start.elapsed()) {
+                if stop.load(Ordering::Relaxed) {
+                    break;
+                }
+                std::thread::sleep(wait.min(STOP_POLL));
             }
+        }
+        if stop.load(Ordering::Relaxed) {
+            return Ok(went);
         }
         send(&sent.bytes)?;
     }
-    Ok(())
+    Ok(session.len())
 }
+
+/// How often [`pace_until`] looks at its stop flag while it waits.
+pub const STOP_POLL: Duration = Duration::from_millis(20);
 
 /// Everything a performance produced.
 #[derive(Clone, Debug, Default)]

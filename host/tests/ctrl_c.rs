@@ -6,7 +6,8 @@
 //! loadable, the recording written. A second Ctrl-C quits at once (exit
 //! code 130) and leaves no emulated board running. `stream` to a board on
 //! a serial port ends early the same way on Ctrl-C, and a Ctrl-C before the
-//! board answers ends it without arming the board.
+//! board answers ends it without arming the board. `replay --port` ends
+//! early the same way, the board disarmed.
 
 #[path = "support/recording.rs"]
 mod recording;
@@ -338,6 +339,82 @@ fn ctrl_c_ends_a_stream_early_and_cleanly() {
     let take = marionette_host::take::Take::load(&take).expect("the take loads");
     assert_eq!(take.source, "stream");
     assert_eq!(take.info().sent.tracker_frames, sent.len());
+}
+
+/// `replay --port` of a 21 s take (made by `sim` on the same rig and
+/// table) to the emulated board on a pty, Ctrl-C once the servos move: it
+/// tells the board to disarm (the board then ends cleanly, having tripped
+/// nothing), says where it stopped, and compares the telemetry of the
+/// frames it sent: all of them match the take's.
+#[test]
+fn ctrl_c_ends_a_replay_to_a_port_early_and_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let region = board_region(dir.path());
+    let (recording, _) = repeated_recording(dir.path(), 10);
+    let take = dir.path().join("sim.take");
+    let rig = repo().join("rigs/humanoid16.toml");
+    let sim = Command::new(env!("CARGO_BIN_EXE_marionette"))
+        .args(["sim", "--rig", s(&rig), "--tables"])
+        .args([s(&rest_tables(dir.path())), "--recording", s(&recording)])
+        .args(["--out", s(&dir.path().join("sim")), "--take", s(&take)])
+        .output()
+        .unwrap();
+    assert!(sim.status.success(), "{sim:?}");
+    let messages = marionette_host::take::Take::load(&take)
+        .unwrap()
+        .session()
+        .len();
+    let servo = dir.path().join("uart1.bin");
+    let elf = marionette_host::qemu::firmware_elf("perform").unwrap();
+    let mut board = marionette_host::qemu::PtyBoard::start(&elf, &region, &servo).unwrap();
+    let port = ["--port", s(board.pty()), "--baud", "200000"];
+    let child = Live::spawn(&[&["replay", s(&take)], &port[..]]);
+    let replay = Live::with(child, dir.path().join("out"), take.clone());
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while std::fs::metadata(&servo).map_or(0, |m| m.len()) < 4096 {
+        assert!(Instant::now() < deadline, "the board never moved");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    replay.ctrl_c();
+    let (status, stdout, stderr) = replay.finish(Duration::from_secs(120));
+    assert!(
+        status.success(),
+        "replay ends cleanly on Ctrl-C: {status} {stderr}"
+    );
+    assert!(
+        stderr.contains("replay: stopping (Ctrl-C again to quit now)"),
+        "{stderr}"
+    );
+    let head = "replay: stopped by Ctrl-C after ";
+    let stopped = stdout
+        .lines()
+        .find(|l| l.starts_with(head))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    let sent: usize = stopped[head.len()..]
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(sent > 2 && sent < messages, "{stopped} ({messages})");
+    assert!(
+        stopped.contains(&format!(" of the take's {messages} messages")),
+        "{stopped}"
+    );
+    let summary = stdout
+        .lines()
+        .find(|l| l.starts_with("replay on "))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(summary.contains("fail-safe trips 0 (take: 0)"), "{summary}");
+    let compared: usize = summary
+        .split("; ")
+        .find_map(|part| part.strip_suffix(" telemetry compared, 0 differ"))
+        .unwrap_or_else(|| panic!("telemetry compared, none differ: {summary}"))
+        .parse()
+        .unwrap();
+    assert!(compared > 0 && compared < sent, "{summary}");
+    // The board got the Disarm: it eases to rest and ends (exit 0).
+    assert_eq!(board.wait(Duration::from_secs(30)).unwrap(), Some(0));
 }
 
 #[test]

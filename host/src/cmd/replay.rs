@@ -10,16 +10,23 @@
 //! tracker frame (sequence number), which a take from a port holds too
 //! (a board on a port shows no servo output). Any difference fails the
 //! command.
+//!
+//! To a port, Ctrl-C ends the replay early ([`crate::interrupt`]): the
+//! board is told to disarm, and the telemetry of the frames sent is
+//! compared as at the end; a second Ctrl-C quits at once.
 
 use super::CmdError;
 use super::stream::{Replies, await_disarm};
 use crate::perform::{self, Pacing, Sent};
 use crate::refusal::{self, ShowReport, Stop};
 use crate::take::Take;
-use marionette_core::wire::Message;
+use marionette_core::wire::compact;
+use marionette_core::wire::{Command, CommandKind, Message};
 use serde::Serialize;
+use std::collections::HashSet;
 use std::io::Write as _;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// Arguments of `marionette replay`.
@@ -81,6 +88,9 @@ pub struct Summary {
     pub seconds: f64,
     /// The board's flashed show, from its last `Status`.
     pub show: Option<ShowReport>,
+    /// Whether a Ctrl-C ended it before the take's end (on a port: the
+    /// board was then disarmed by the replay).
+    pub stopped: bool,
 }
 
 /// The take's session with its times scaled by `1 / speed` (from the first).
@@ -207,18 +217,23 @@ pub fn emulated(take: &Take, pacing: Pacing, speed: f64) -> Result<Summary, CmdE
         ],
         seconds: start.elapsed().as_secs_f64(),
         show: ShowReport::of(&board.replies),
+        stopped: false,
     })
 }
 
 /// Replays to a board on a serial port: says the take's `Hello` until the
-/// board answers, then sends the rest at its times.
+/// board answers, then sends the rest at its times, until `stop` is set
+/// (a Ctrl-C: [`crate::interrupt`]). Stopped early, it disarms the board
+/// itself (the take's own `Disarm` is at its end) and compares only the
+/// telemetry of the tracker frames it sent; stopped before the board
+/// answered, it ends with an error and the board is never armed.
 pub fn on_port(
     take: &Take,
-    port_name: &str,
-    baud: u32,
-    pacing: Pacing,
-    speed: f64,
+    port: (&str, u32),
+    (pacing, speed): (Pacing, f64),
+    stop: &AtomicBool,
 ) -> Result<(Summary, Vec<Message>), CmdError> {
+    let (port_name, baud) = port;
     let start = Instant::now();
     let session = scaled(&take.session(), speed);
     let mut port = serialport::new(port_name, baud)
@@ -228,40 +243,30 @@ pub fn on_port(
     let reader = port.try_clone().map_err(|e| format!("{port_name}: {e}"))?;
     let replies = Replies::spawn(reader);
     let (hello, rest) = session.split_at(1.min(session.len()));
-    let mut answered = false;
-    for _ in 0..5 {
-        for s in hello {
-            port.write_all(&s.bytes)
-                .map_err(|e| format!("{port_name}: {e}"))?;
-        }
-        let status = replies.wait_for(Duration::from_secs(1), |m| match m {
-            Message::Status(s) if s.request_seq.is_none() => Some(()),
-            _ => None,
-        });
-        if status.is_some() {
-            answered = true;
-            break;
-        }
+    let mut write = |bytes: &[u8]| {
+        port.write_all(bytes)
+            .map_err(|e| format!("{port_name}: {e}"))
+    };
+    say_hello(hello, &replies, port_name, stop, &mut write)?;
+    let went = perform::pace_until(rest, pacing, stop, &mut write)?;
+    let stopped = went < rest.len();
+    if stopped {
+        write(&perform::encode(&Message::Command(Command {
+            seq: u32::try_from(session.len()).unwrap_or(u32::MAX),
+            kind: CommandKind::Disarm,
+        }))?)?;
     }
-    if !answered {
-        return Err(Box::new(Stop::fault(
-            format!("the board on {port_name}"),
-            "no answer to Hello in 5 s: check the port, the baud rate, and that the board runs \
-             Marionette's firmware",
-        )));
-    }
-    perform::pace(rest, pacing, |bytes| port.write_all(bytes))
-        .map_err(|e| format!("{port_name}: {e}"))?;
     await_disarm(&replies, Duration::from_secs(20));
     let messages = replies.finish();
     if let Some(stop) = stop_of(&format!("the board on {port_name}"), &messages, take, None) {
         return Err(Box::new(stop));
     }
+    let sent = rest.get(..went).unwrap_or(rest);
     let (telemetry_compared, telemetry_mismatches) =
-        telemetry_mismatches(&take.replies(), &messages);
+        telemetry_mismatches(&take_telemetry_of(take, sent), &messages);
     let summary = Summary {
         board: port_name.to_string(),
-        sent: session.len(),
+        sent: hello.len() + went + usize::from(stopped),
         take_outputs: take.outputs().len(),
         board_outputs: None,
         mismatches: None,
@@ -275,8 +280,69 @@ pub fn on_port(
         ],
         seconds: start.elapsed().as_secs_f64(),
         show: ShowReport::of(&messages),
+        stopped,
     };
     Ok((summary, messages))
+}
+
+/// Says the take's `Hello` (once a second, five times at most) until the
+/// board answers with a `Status`; an error if it never does, or if `stop`
+/// is set first.
+fn say_hello<E>(
+    hello: &[Sent],
+    replies: &Replies,
+    port_name: &str,
+    stop: &AtomicBool,
+    write: &mut impl FnMut(&[u8]) -> Result<(), E>,
+) -> Result<(), CmdError>
+where
+    CmdError: From<E>,
+{
+    for _ in 0..5 {
+        if stop.load(Ordering::Relaxed) {
+            return Err(super::stream::stopped_before_arming(port_name));
+        }
+        for s in hello {
+            write(&s.bytes)?;
+        }
+        let status = replies.wait_for(Duration::from_secs(1), |m| match m {
+            Message::Status(s) if s.request_seq.is_none() => Some(()),
+            _ => None,
+        });
+        if status.is_some() {
+            return Ok(());
+        }
+    }
+    if stop.load(Ordering::Relaxed) {
+        return Err(super::stream::stopped_before_arming(port_name));
+    }
+    Err(Box::new(Stop::fault(
+        format!("the board on {port_name}"),
+        "no answer to Hello in 5 s: check the port, the baud rate, and that the board runs \
+         Marionette's firmware",
+    )))
+}
+
+/// The take's replies, its telemetry kept only for the tracker frames in
+/// `sent` (a replay stopped early compares what it sent; all of them for
+/// a whole replay).
+fn take_telemetry_of(take: &Take, sent: &[Sent]) -> Vec<Message> {
+    let mut seqs = HashSet::new();
+    let mut last = None;
+    for m in sent.iter().flat_map(|s| perform::decode_replies(&s.bytes)) {
+        let seq = match m {
+            Message::TrackerFrame(f) => f.seq,
+            // Extended from the last one as the board does.
+            Message::CompactFrame(c) => compact::extend_seq(last, c.seq16()),
+            _ => continue,
+        };
+        last = Some(seq);
+        seqs.insert(seq);
+    }
+    take.replies()
+        .into_iter()
+        .filter(|m| !matches!(m, Message::Telemetry(t) if !seqs.contains(&t.seq)))
+        .collect()
 }
 
 /// Replays the take and prints the summary.
@@ -291,7 +357,10 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         Pacing::RealTime
     };
     let summary = match (&args.port, args.emulated) {
-        (Some(port), false) => on_port(&take, port, args.baud, pacing, args.speed).map(|r| r.0),
+        (Some(port), false) => {
+            let stop = crate::interrupt::stop_on_ctrl_c("replay")?;
+            on_port(&take, (port, args.baud), (pacing, args.speed), stop).map(|r| r.0)
+        }
         (None, true) => emulated(&take, pacing, args.speed),
         _ => return Err("replay: say where, --emulated or --port DEV".into()),
     }
@@ -299,6 +368,14 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
+        if summary.stopped {
+            println!(
+                "replay: stopped by Ctrl-C after {} of the take's {} messages; the board was \
+                 told to disarm",
+                summary.sent.saturating_sub(1),
+                take.session().len()
+            );
+        }
         println!(
             "replay on {}: {} messages sent, {} replies, fail-safe trips {} (take: {}); \
              {} servo outputs in the take, {} from the board, {} differ; {} telemetry \

@@ -307,7 +307,7 @@ pub fn handshake(
 
 /// Ctrl-C before the board armed: the command ends without arming it
 /// (nothing but `Hello` was sent).
-fn stopped_before_arming(port: &str) -> CmdError {
+pub(crate) fn stopped_before_arming(port: &str) -> CmdError {
     format!("{port}: stopped by Ctrl-C before the board armed (it was sent only Hello)").into()
 }
 
