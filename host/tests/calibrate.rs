@@ -183,6 +183,76 @@ fn calibrate_in_a_terminal_jogs_the_emulated_board_and_writes_the_rig() {
     );
 }
 
+/// The processes whose parent is `pid` (from `/proc/*/stat`).
+fn children_of(pid: u32) -> Vec<u32> {
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|e| {
+            let id: u32 = e.ok()?.file_name().to_str()?.parse().ok()?;
+            let stat = std::fs::read_to_string(format!("/proc/{id}/stat")).ok()?;
+            // `pid (comm) state ppid …`: the command may hold spaces.
+            let ppid = stat.rsplit_once(") ")?.1.split(' ').nth(1)?;
+            (ppid.parse() == Ok(pid)).then_some(id)
+        })
+        .collect()
+}
+
+/// Whether process `pid` still runs (exists and is not a zombie).
+fn running(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .ok()
+        .and_then(|stat| Some(stat.rsplit_once(") ")?.1.starts_with('Z')))
+        .is_some_and(|zombie| !zombie)
+}
+
+/// Ctrl-C quits as `q` does: the servo eases back to rest, the command
+/// exits 0, nothing is written, and the emulated board it started does not
+/// outlive it (the terminal's Ctrl-C used to end the command alone and
+/// leave QEMU running). Channel 1 is jogged up one large step, then
+/// Ctrl-C pressed: once the servo link shows the step (`settled`: at the
+/// prompt, a key in the terminal's raw mode), or as soon as the screen
+/// shows the command (mostly while the screen settles: a signal).
+fn quits_on_ctrl_c(settled: bool) {
+    let original = shipped_rig();
+    let Some((tmux, rig, _dir)) = start(&original) else {
+        return;
+    };
+    tmux.wait_for(&["channel 1, range 1000 µs..2000 µs", "commanded 1500 µs"]);
+    let shell: u32 = tmux
+        .run(&["display", "-p", "-t", "cal", "#{pane_pid}"])
+        .trim()
+        .parse()
+        .unwrap();
+    let tool = children_of(shell);
+    assert_eq!(tool.len(), 1, "the shell runs calibrate: {tool:?}");
+    let board = children_of(tool[0]);
+    assert_eq!(
+        board.len(),
+        1,
+        "calibrate runs the emulated board: {board:?}"
+    );
+    tmux.keys(&["k"]);
+    if settled {
+        tmux.wait_for(&["commanded 1600 µs, on the servo link 1600 µs"]);
+    } else {
+        tmux.wait_for(&["commanded 1600 µs"]);
+    }
+    tmux.keys(&["C-c"]);
+    tmux.wait_for(&["back to rest", "on the servo link 1500 µs", "EXIT=0"]);
+    assert!(!running(board[0]), "the emulated board still runs");
+    assert_eq!(std::fs::read_to_string(&rig).unwrap(), original);
+}
+
+#[test]
+fn ctrl_c_at_calibrates_prompt_eases_back_to_rest_and_leaves_no_board_running() {
+    quits_on_ctrl_c(true);
+}
+
+#[test]
+fn ctrl_c_right_behind_a_jog_eases_back_to_rest_and_leaves_no_board_running() {
+    quits_on_ctrl_c(false);
+}
+
 /// The same puppet on Dynamixel bus servos: positions (4096 a turn, centre
 /// 2048), channel 1's ±45° are 2048 ∓ 512; the board's Sync Writes carry the
 /// positions, and the tool writes `limits` and `center`.

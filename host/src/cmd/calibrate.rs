@@ -22,7 +22,7 @@
 //! | `x` | the current value is the **max** (the high end) |
 //! | `c` | the current value is the **centre** |
 //! | `w` | write min, centre and max into the rig file |
-//! | `q` | ease the servo back to rest and quit |
+//! | `q` (or Ctrl-C) | ease the servo back to rest and quit |
 //!
 //! Writing keeps the rig file's comments and layout (`toml_edit`): in the
 //! `[[servo]]` entry of the channel, a pulse servo gets `pulse_us = [min,
@@ -45,6 +45,7 @@ use marionette_core::wire::{
 };
 use std::io::Read;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use toml_edit::{DocumentMut, Item, Value};
@@ -382,6 +383,10 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     if !term.is_term() {
         return Err("calibrate is interactive: run it in a terminal".into());
     }
+    // Ctrl-C between keys (while the screen settles) quits as `q` does;
+    // the emulated board runs out of the terminal's Ctrl-C, ended by this
+    // process ([`crate::interrupt`]).
+    let stop = crate::interrupt::stop_on_ctrl_c("calibrate")?;
     let rig_blob = rigfile::to_blob(&rig)?;
     let region = perform::region(&rig_blob, None);
     let channels = desc
@@ -421,7 +426,7 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     let name = rig.name().to_string();
     s.jog(servo.rest_us)?;
     s.settle(&term, &name, Duration::from_secs(2))?;
-    let outcome = keys(&term, &mut s, &path, &servo, &name);
+    let outcome = keys(&term, &mut s, (&path, &servo, &name), stop);
     // Back to rest; Disarm also ends the emulated board's session.
     s.message = "back to rest".into();
     s.value = servo.rest_us;
@@ -435,17 +440,17 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     outcome
 }
 
-/// The key loop.
+/// The key loop, until `q`, Escape or Ctrl-C (a key in the terminal's raw
+/// mode, or a signal that set `stop` while the screen settled).
 fn keys(
     term: &Term,
     s: &mut Session<'_>,
-    path: &Path,
-    servo: &ServoDesc,
-    rig: &str,
+    (path, servo, rig): (&Path, &ServoDesc, &str),
+    stop: &AtomicBool,
 ) -> Result<(), CmdError> {
     let (small, big) = if s.bus { (5.0, 50.0) } else { (10.0, 100.0) };
-    loop {
-        let key = term.read_key()?;
+    while !stop.load(Ordering::Relaxed) {
+        let key = term.read_key_raw()?;
         s.message.clear();
         let step = match key {
             Key::ArrowLeft | Key::Char('h') => Some(-small),
@@ -471,7 +476,7 @@ fn keys(
                 };
                 None
             }
-            Key::Char('q') | Key::Escape => return Ok(()),
+            Key::Char('q') | Key::Escape | Key::CtrlC => return Ok(()),
             _ => None,
         };
         if let Some(step) = step {
@@ -479,6 +484,7 @@ fn keys(
         }
         s.settle(term, rig, Duration::from_secs(2))?;
     }
+    Ok(())
 }
 
 /// Sets `key` of `table` to `value`, keeping the old value's comments and
