@@ -1,23 +1,28 @@
-//! Ctrl-C for the commands that run until told to stop (`live`, and
-//! `stream` and `replay --port` on a long recording): one handler for all
-//! of them.
+//! Ctrl-C (and SIGTERM, SIGHUP) for every `marionette` command: one
+//! handler for the whole process, so that an emulated board (QEMU) never
+//! outlives the command that started it.
 //!
-//! [`stop_on_ctrl_c`] installs it (SIGINT, and SIGTERM and SIGHUP too). The
-//! first signal sets the stop flag it returns and says on stderr that the
-//! command is stopping: the session then ends as it does at `--seconds` or
-//! at the end of its recording (the board disarmed, the summary printed,
-//! the end check run, the take saved). Before the board has armed (while
-//! the command still says `Hello`), it ends the command with an error
-//! instead, and the board is never armed. A second signal quits at once with
-//! exit code 130, for a session that hangs on its way out.
+//! `main` calls [`install`] first. From then on children start in a process
+//! group of their own ([`spawn`]), out of the terminal's Ctrl-C, and a
+//! signal ends them (SIGKILL) before the command quits with exit code
+//! [`QUIT_NOW`]. Without that, a signal that reaches the command alone
+//! (`kill PID`, a supervisor's SIGTERM, a terminal library that re-raises
+//! Ctrl-C to its own process) ended the command and left QEMU running the
+//! firmware's loop on a whole core, its sockets' other end gone.
 //!
-//! A terminal's Ctrl-C goes to every process of its foreground process
-//! group, so an emulated board (QEMU) started by such a command would die
-//! with the first Ctrl-C, before it is disarmed and checked. Once the
-//! handler is installed, [`spawn`] starts children in their own process
-//! group instead, and the quit at once ends them (SIGKILL) before exiting:
-//! nothing is left running. Without the handler (every other command) a
-//! child shares the command's group and dies with it as before.
+//! The commands that run until told to stop (`live`; `stream` and `replay
+//! --port` on a long recording; `calibrate`) ask for a clean stop instead
+//! with [`stop_on_ctrl_c`]: the first signal sets the stop flag it returns
+//! and says on stderr that the command is stopping: the session then ends
+//! as it does at `--seconds` or at the end of its recording (the board
+//! disarmed, the summary printed, the end check run, the take saved).
+//! Before the board has armed (while the command still says `Hello`), it
+//! ends the command with an error instead, and the board is never armed.
+//! A second signal quits at once, as above, for a session that hangs on its
+//! way out.
+//!
+//! Library use (the tests call commands' functions in their own process)
+//! installs nothing: children then share the caller's process group.
 
 use crate::cmd::CmdError;
 use nix::sys::signal::{Signal, kill};
@@ -33,6 +38,8 @@ static STOP: AtomicBool = AtomicBool::new(false);
 static SIGNALS: AtomicUsize = AtomicUsize::new(0);
 /// Whether the handler is installed.
 static INSTALLED: AtomicBool = AtomicBool::new(false);
+/// The command that stops cleanly on the first signal, if one asked.
+static GRACEFUL: Mutex<Option<&'static str>> = Mutex::new(None);
 /// The children to end on the quit at once (process ids).
 static CHILDREN: Mutex<Vec<u32>> = Mutex::new(Vec::new());
 
@@ -40,25 +47,41 @@ static CHILDREN: Mutex<Vec<u32>> = Mutex::new(Vec::new());
 /// process ended by Ctrl-C).
 pub const QUIT_NOW: i32 = 130;
 
-/// Installs the handler for `command` (the name it says it is stopping
-/// under, e.g. `live`) and returns the flag the first Ctrl-C sets. Once per
-/// process: a second call is refused.
+/// Installs the process's handler (once; later calls do nothing): a
+/// signal ends the children and quits, unless a command asked for a clean
+/// stop ([`stop_on_ctrl_c`]).
+pub fn install() -> Result<(), CmdError> {
+    if INSTALLED.swap(true, Ordering::SeqCst) {
+        return Ok(());
+    }
+    ctrlc::set_handler(on_signal).map_err(|e| {
+        INSTALLED.store(false, Ordering::SeqCst);
+        format!("cannot handle Ctrl-C: {e}")
+    })?;
+    Ok(())
+}
+
+/// Asks for a clean stop for `command` (the name it says it is stopping
+/// under, e.g. `live`), installing the handler if `main` has not; returns
+/// the flag the first signal sets.
 pub fn stop_on_ctrl_c(command: &'static str) -> Result<&'static AtomicBool, CmdError> {
-    ctrlc::set_handler(move || on_signal(command))
-        .map_err(|e| format!("{command}: cannot handle Ctrl-C: {e}"))?;
-    INSTALLED.store(true, Ordering::SeqCst);
+    install().map_err(|e| format!("{command}: {e}"))?;
+    *lock(&GRACEFUL) = Some(command);
     Ok(&STOP)
 }
 
 /// What a signal does (on ctrlc's thread, not in the signal handler: it
 /// may print, lock and exit).
-fn on_signal(command: &str) {
-    if SIGNALS.fetch_add(1, Ordering::SeqCst) == 0 {
+fn on_signal() {
+    let graceful = *lock(&GRACEFUL);
+    let first = SIGNALS.fetch_add(1, Ordering::SeqCst) == 0;
+    if let (Some(command), true) = (graceful, first) {
         STOP.store(true, Ordering::SeqCst);
         eprintln!("{command}: stopping (Ctrl-C again to quit now)");
         return;
     }
-    eprintln!("{command}: quitting now (exit code {QUIT_NOW})");
+    let name = graceful.unwrap_or("marionette");
+    eprintln!("{name}: quitting now (exit code {QUIT_NOW})");
     for &id in children().iter() {
         if let Ok(pid) = i32::try_from(id) {
             let _ = kill(Pid::from_raw(pid), Signal::SIGKILL);
@@ -102,8 +125,12 @@ pub fn end(child: &mut Child) {
     list.retain(|&id| id != child.id());
 }
 
-/// The children to end, locked (a poisoned lock is still used: the list
-/// stays valid).
+/// The children to end, locked.
 fn children() -> MutexGuard<'static, Vec<u32>> {
-    CHILDREN.lock().unwrap_or_else(PoisonError::into_inner)
+    lock(&CHILDREN)
+}
+
+/// `mutex` locked (a poisoned lock is still used: its value stays valid).
+fn lock<T>(mutex: &'static Mutex<T>) -> MutexGuard<'static, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }

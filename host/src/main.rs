@@ -12,7 +12,7 @@ use std::process::ExitCode;
     about,
     after_help = "Exit codes: 0 success; 1 error (bad input, I/O, board and native core disagree); \
                   2 bad command line; 3 the board never armed (its Status reason is printed); \
-                  4 the board stopped on a fault; 130 a second Ctrl-C quit `live`, `stream` or `replay --port` at once.\n\
+                  4 the board stopped on a fault; 130 quit on a signal (Ctrl-C, SIGTERM, SIGHUP; for `live`, `stream`, `replay --port` and `calibrate` the second one: the first stops them cleanly).\n\
                   File formats (goals, build spec, example set, rig, recording): docs/README.md."
 )]
 struct Cli {
@@ -66,6 +66,10 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Before any emulated board starts: a signal must end it too.
+    if let Err(e) = marionette_host::interrupt::install() {
+        eprintln!("marionette: {e}");
+    }
     let result = match cli.command {
         Command::Demo(args) => cmd::demo::run(&args),
         Command::Emulate(args) => cmd::emulate::run(&args),

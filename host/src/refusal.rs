@@ -17,7 +17,7 @@
 //! | 2 | bad command line (clap's usage error) |
 //! | [`EXIT_REFUSED`] = 3 | the board never armed: it refused with the `Status` reason printed |
 //! | [`EXIT_FAULT`] = 4 | the board stopped on a fault: it did not answer, exited with an error, reset or ran past its deadline |
-//! | [`crate::interrupt::QUIT_NOW`] = 130 | `live`, `stream`: a second Ctrl-C quit at once (the first ends the session cleanly, exit code as above) |
+//! | [`crate::interrupt::QUIT_NOW`] = 130 | quit at once on a signal (Ctrl-C, SIGTERM, SIGHUP), the emulated board ended too; for `live`, `stream`, `replay --port` and `calibrate` the second signal (the first ends the session cleanly, exit code as above) |
 
 use crate::board::{self, Board};
 use marionette_core::region::{self, EntryKind, Region};

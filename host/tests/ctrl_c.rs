@@ -7,7 +7,8 @@
 //! code 130) and leaves no emulated board running. `stream` to a board on
 //! a serial port ends early the same way on Ctrl-C, and a Ctrl-C before the
 //! board answers ends it without arming the board. `replay --port` ends
-//! early the same way, the board disarmed.
+//! early the same way, the board disarmed. A signal to any other command
+//! (here `emulate`), sent to it alone, ends its emulated board too.
 
 #[path = "support/recording.rs"]
 mod recording;
@@ -269,6 +270,64 @@ fn a_second_ctrl_c_quits_at_once_and_leaves_no_board_running() {
             Instant::now() < deadline,
             "left running: {:?}",
             processes_naming(&region)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// A signal to the command alone (`kill PID`, a supervisor's SIGTERM), not
+/// to its process group: `emulate` quits with exit code 130 and its
+/// emulated board ends with it (it used to keep running the firmware's
+/// loop on a whole core, its sockets' other end gone).
+#[test]
+fn a_signal_to_the_command_alone_ends_its_emulated_board_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let (recording, _) = repeated_recording(dir.path(), 10);
+    let out = dir.path().join("out");
+    let tables = rest_tables(dir.path());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_marionette"))
+        .args(["emulate", "--tables", s(&tables), "--recording"])
+        .args([s(&recording), "--out", s(&out)])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The command and the board it started both name `out` (the board
+    // reads its flash region from there).
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while processes_naming(&out).len() < 2 {
+        assert!(Instant::now() < deadline, "no emulated board");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let pid = nix::unistd::Pid::from_raw(i32::try_from(child.id()).unwrap());
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(Instant::now() < deadline, "emulate ignored SIGTERM");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut stderr = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
+    assert_eq!(status.code(), Some(130), "{stderr}");
+    assert!(
+        stderr.contains("marionette: quitting now (exit code 130)"),
+        "{stderr}"
+    );
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while !processes_naming(&out).is_empty() {
+        assert!(
+            Instant::now() < deadline,
+            "left running: {:?}",
+            processes_naming(&out)
         );
         std::thread::sleep(Duration::from_millis(50));
     }
