@@ -264,15 +264,7 @@ fn a_second_ctrl_c_quits_at_once_and_leaves_no_board_running() {
         !stdout.contains("stopped by Ctrl-C"),
         "no summary: {stdout}"
     );
-    let deadline = Instant::now() + Duration::from_secs(5);
-    while !processes_naming(&region).is_empty() {
-        assert!(
-            Instant::now() < deadline,
-            "left running: {:?}",
-            processes_naming(&region)
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    none_left_naming(&region);
 }
 
 /// A signal to the command alone (`kill PID`, a supervisor's SIGTERM), not
@@ -322,12 +314,28 @@ fn a_signal_to_the_command_alone_ends_its_emulated_board_too() {
         stderr.contains("marionette: quitting now (exit code 130)"),
         "{stderr}"
     );
+    none_left_naming(&out);
+}
+
+/// Waits (a hang guard of 120 s) until the board has put 4 KB on its
+/// servo link (the file `servo`): a session under way.
+fn moved(servo: &Path) {
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while std::fs::metadata(servo).map_or(0, |m| m.len()) < 4096 {
+        assert!(Instant::now() < deadline, "the board never moved");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Waits (up to 5 s) until no process names `path` (the emulated board
+/// has ended).
+fn none_left_naming(path: &Path) {
     let deadline = Instant::now() + Duration::from_secs(5);
-    while !processes_naming(&out).is_empty() {
+    while !processes_naming(path).is_empty() {
         assert!(
             Instant::now() < deadline,
             "left running: {:?}",
-            processes_naming(&out)
+            processes_naming(path)
         );
         std::thread::sleep(Duration::from_millis(50));
     }
@@ -360,11 +368,7 @@ fn ctrl_c_ends_a_stream_early_and_cleanly() {
         s(&take),
     ]]);
     let stream = Live::with(child, out.clone(), take.clone());
-    let deadline = Instant::now() + Duration::from_secs(120);
-    while std::fs::metadata(&servo).map_or(0, |m| m.len()) < 4096 {
-        assert!(Instant::now() < deadline, "the board never moved");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    moved(&servo);
     stream.ctrl_c();
     let (status, stdout, stderr) = stream.finish(Duration::from_secs(120));
     assert!(status.success(), "stream ends cleanly on Ctrl-C: {status}");
@@ -429,11 +433,7 @@ fn ctrl_c_ends_a_replay_to_a_port_early_and_cleanly() {
     let port = ["--port", s(board.pty()), "--baud", "200000"];
     let child = Live::spawn(&[&["replay", s(&take)], &port[..]]);
     let replay = Live::with(child, dir.path().join("out"), take.clone());
-    let deadline = Instant::now() + Duration::from_secs(120);
-    while std::fs::metadata(&servo).map_or(0, |m| m.len()) < 4096 {
-        assert!(Instant::now() < deadline, "the board never moved");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    moved(&servo);
     replay.ctrl_c();
     let (status, stdout, stderr) = replay.finish(Duration::from_secs(120));
     assert!(
