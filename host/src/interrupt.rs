@@ -21,8 +21,11 @@
 //! A second signal quits at once, as above, for a session that hangs on its
 //! way out.
 //!
-//! Library use (the tests call commands' functions in their own process)
-//! installs nothing: children then share the caller's process group.
+//! A process that calls neither [`install`] nor [`stop_on_ctrl_c`] (tests
+//! calling the commands' functions) installs nothing: its children share
+//! its process group and a signal ends them all as it would have anyway.
+//! Only SIGKILL to the command alone still leaves its emulated board
+//! running (nothing can act on it; QEMU 7.2 has no exit-with-parent).
 
 use crate::cmd::CmdError;
 use nix::sys::signal::{Signal, kill};
