@@ -23,7 +23,7 @@
 //!
 //! A process that calls neither [`install`] nor [`stop_on_ctrl_c`] (tests
 //! calling the commands' functions) installs nothing: its children share
-//! its process group and a signal ends them all as it would have anyway.
+//! its process group, and a signal to the group ends them with it.
 //! Only SIGKILL to the command alone still leaves its emulated board
 //! running (nothing can act on it; QEMU 7.2 has no exit-with-parent).
 
