@@ -16,7 +16,7 @@
 //! compared as at the end; a second Ctrl-C quits at once.
 
 use super::CmdError;
-use super::stream::{Replies, await_disarm};
+use super::stream::{Replies, answer_to_hello, await_disarm};
 use crate::perform::{self, Pacing, Sent};
 use crate::refusal::{self, ShowReport, Stop};
 use crate::take::Take;
@@ -26,7 +26,7 @@ use serde::Serialize;
 use std::collections::HashSet;
 use std::io::Write as _;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 /// Arguments of `marionette replay`.
@@ -247,7 +247,12 @@ pub fn on_port(
         port.write_all(bytes)
             .map_err(|e| format!("{port_name}: {e}"))
     };
-    say_hello(hello, &replies, port_name, stop, &mut write)?;
+    let say = &mut || {
+        hello
+            .iter()
+            .try_for_each(|s| write(&s.bytes).map_err(Into::into))
+    };
+    answer_to_hello(say, &replies, (port_name, Duration::from_secs(5)), stop)?;
     let went = perform::pace_until(rest, pacing, stop, &mut write)?;
     let stopped = went < rest.len();
     if stopped {
@@ -283,44 +288,6 @@ pub fn on_port(
         stopped,
     };
     Ok((summary, messages))
-}
-
-/// Says the take's `Hello` (once a second, five times at most) until the
-/// board answers with a `Status`; an error if it never does, or if `stop`
-/// is set first.
-fn say_hello<E>(
-    hello: &[Sent],
-    replies: &Replies,
-    port_name: &str,
-    stop: &AtomicBool,
-    write: &mut impl FnMut(&[u8]) -> Result<(), E>,
-) -> Result<(), CmdError>
-where
-    CmdError: From<E>,
-{
-    for _ in 0..5 {
-        if stop.load(Ordering::Relaxed) {
-            return Err(super::stream::stopped_before_arming(port_name));
-        }
-        for s in hello {
-            write(&s.bytes)?;
-        }
-        let status = replies.wait_for(Duration::from_secs(1), |m| match m {
-            Message::Status(s) if s.request_seq.is_none() => Some(()),
-            _ => None,
-        });
-        if status.is_some() {
-            return Ok(());
-        }
-    }
-    if stop.load(Ordering::Relaxed) {
-        return Err(super::stream::stopped_before_arming(port_name));
-    }
-    Err(Box::new(Stop::fault(
-        format!("the board on {port_name}"),
-        "no answer to Hello in 5 s: check the port, the baud rate, and that the board runs \
-         Marionette's firmware",
-    )))
 }
 
 /// The take's replies, its telemetry kept only for the tracker frames in

@@ -38,7 +38,7 @@ use crate::refusal::{ShowReport, Stop};
 use crate::sender::{Counts, Sender};
 use crate::{import, rigfile};
 use marionette_core::wire::{
-    CommandKind, FrameTiming, Message, ShowState, State, StatusReason, TrackerFrame,
+    CommandKind, FrameTiming, Message, ShowState, State, Status, StatusReason, TrackerFrame,
 };
 use serde::Serialize;
 use std::io::Read;
@@ -263,12 +263,42 @@ pub fn handshake(
     limit: Duration,
     stop: &AtomicBool,
 ) -> Result<(), CmdError> {
+    let say = &mut || {
+        sender.hello();
+        Ok(())
+    };
+    let status = answer_to_hello(say, replies, (port, limit), stop)?;
+    if status.reason != StatusReason::Ok || !status.table_ok {
+        let reason = if status.reason == StatusReason::Ok {
+            StatusReason::NoTable
+        } else {
+            status.reason
+        };
+        return Err(Box::new(Stop::refused(
+            format!("the board on {port}"),
+            reason,
+            &[],
+            None,
+        )));
+    }
+    Ok(())
+}
+
+/// The board's answer to `Hello`: says it (`say`) once a second until the
+/// board sends a `Status`, for up to `limit`; a fault if it never does, an
+/// error if `stop` is set first (the board is then never armed).
+pub fn answer_to_hello(
+    say: &mut dyn FnMut() -> Result<(), CmdError>,
+    replies: &Replies,
+    (port, limit): (&str, Duration),
+    stop: &AtomicBool,
+) -> Result<Status, CmdError> {
     let deadline = Instant::now() + limit;
     let status = loop {
         if stop.load(Ordering::Relaxed) {
             return Err(stopped_before_arming(port));
         }
-        sender.hello();
+        say()?;
         let got = replies.wait_for(Duration::from_secs(1), |m| match m {
             Message::Status(st) if st.request_seq.is_none() => Some(*st),
             _ => None,
@@ -289,25 +319,12 @@ pub fn handshake(
     if stop.load(Ordering::Relaxed) {
         return Err(stopped_before_arming(port));
     }
-    if status.reason != StatusReason::Ok || !status.table_ok {
-        let reason = if status.reason == StatusReason::Ok {
-            StatusReason::NoTable
-        } else {
-            status.reason
-        };
-        return Err(Box::new(Stop::refused(
-            format!("the board on {port}"),
-            reason,
-            &[],
-            None,
-        )));
-    }
-    Ok(())
+    Ok(status)
 }
 
 /// Ctrl-C before the board armed: the command ends without arming it
 /// (nothing but `Hello` was sent).
-pub(crate) fn stopped_before_arming(port: &str) -> CmdError {
+fn stopped_before_arming(port: &str) -> CmdError {
     format!("{port}: stopped by Ctrl-C before the board armed (it was sent only Hello)").into()
 }
 
