@@ -24,16 +24,25 @@
 //! A process that calls neither [`install`] nor [`stop_on_ctrl_c`] (tests
 //! calling the commands' functions) installs nothing: its children share
 //! its process group, and a signal to the group ends them with it.
-//! Only SIGKILL to the command alone still leaves its emulated board
-//! running (nothing can act on it; QEMU 7.2 has no exit-with-parent).
+//!
+//! SIGKILL (or a crash) ends the command before any handler runs. For
+//! that, children start through util-linux's `setpriv --pdeathsig KILL`
+//! where this machine has it ([`command`]): the kernel then kills the
+//! board when the thread that started it ends (start and end a board on
+//! one thread, as every command does). QEMU 7.2 has no exit-with-parent
+//! of its own, and setting the signal in the child ourselves would take
+//! `unsafe` (`pre_exec`). Without `setpriv` (not a Linux with util-linux
+//! 2.33 or later) a SIGKILL to the command alone still leaves its board
+//! running.
 
 use crate::cmd::CmdError;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
+use std::ffi::OsStr;
 use std::os::unix::process::CommandExt;
-use std::process::{Child, Command, ExitStatus};
+use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Mutex, MutexGuard, PoisonError};
+use std::sync::{Mutex, MutexGuard, OnceLock, PoisonError};
 
 /// Set by the first signal.
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -91,6 +100,35 @@ fn on_signal() {
         }
     }
     std::process::exit(QUIT_NOW);
+}
+
+/// A command that runs `program` and is killed when the calling thread
+/// ends, even by SIGKILL: `setpriv --pdeathsig KILL -- program` where
+/// `setpriv` knows that option, else `program` itself. `setpriv` replaces
+/// itself with `program` (the same process id).
+pub fn command(program: &OsStr) -> Command {
+    if has_pdeathsig() {
+        let mut cmd = Command::new("setpriv");
+        cmd.args(["--pdeathsig", "KILL", "--"]).arg(program);
+        cmd
+    } else {
+        Command::new(program)
+    }
+}
+
+/// Whether `setpriv` is on the `PATH` and has `--pdeathsig` (asked once).
+fn has_pdeathsig() -> bool {
+    static HAS: OnceLock<bool> = OnceLock::new();
+    *HAS.get_or_init(|| {
+        Command::new("setpriv")
+            .arg("--help")
+            .stdin(Stdio::null())
+            .stderr(Stdio::null())
+            .output()
+            .is_ok_and(|out| {
+                out.status.success() && String::from_utf8_lossy(&out.stdout).contains("--pdeathsig")
+            })
+    })
 }
 
 /// Spawns `cmd`: with the handler installed, in a process group of its

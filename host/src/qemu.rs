@@ -552,7 +552,7 @@ enum Uarts<'a> {
 
 /// The QEMU command line for `config`, with UARTs as `uarts` says.
 fn qemu_command(qemu: &Path, config: &Config, uarts: &Uarts<'_>) -> Result<Command, QemuError> {
-    let mut cmd = Command::new(qemu);
+    let mut cmd = interrupt::command(qemu.as_os_str());
     cmd.args(["-machine", "mps2-an386", "-cpu", "cortex-m4"])
         .args(["-display", "none", "-monitor", "none"])
         .args(["-semihosting-config", "enable=on,target=native"]);

@@ -274,34 +274,10 @@ fn a_second_ctrl_c_quits_at_once_and_leaves_no_board_running() {
 #[test]
 fn a_signal_to_the_command_alone_ends_its_emulated_board_too() {
     let dir = tempfile::tempdir().unwrap();
-    let (recording, _) = repeated_recording(dir.path(), 10);
-    let out = dir.path().join("out");
-    let tables = rest_tables(dir.path());
-    let mut child = Command::new(env!("CARGO_BIN_EXE_marionette"))
-        .args(["emulate", "--tables", s(&tables), "--recording"])
-        .args([s(&recording), "--out", s(&out)])
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // The command and the board it started both name `out` (the board
-    // reads its flash region from there).
-    let deadline = Instant::now() + Duration::from_secs(120);
-    while processes_naming(&out).len() < 2 {
-        assert!(Instant::now() < deadline, "no emulated board");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let (mut child, out) = emulating(dir.path());
     let pid = nix::unistd::Pid::from_raw(i32::try_from(child.id()).unwrap());
     nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).unwrap();
-    let deadline = Instant::now() + Duration::from_secs(30);
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        assert!(Instant::now() < deadline, "emulate ignored SIGTERM");
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let status = ended(&mut child);
     let mut stderr = String::new();
     child
         .stderr
@@ -315,6 +291,57 @@ fn a_signal_to_the_command_alone_ends_its_emulated_board_too() {
         "{stderr}"
     );
     none_left_naming(&out);
+}
+
+/// SIGKILL to the command alone: no handler runs, but the emulated board
+/// was started through `setpriv --pdeathsig KILL` (util-linux, on every
+/// Debian), so the kernel ends it with the command.
+#[test]
+fn sigkill_to_the_command_alone_ends_its_emulated_board_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut child, out) = emulating(dir.path());
+    child.kill().unwrap();
+    let status = ended(&mut child);
+    assert_eq!(
+        std::os::unix::process::ExitStatusExt::signal(&status),
+        Some(9)
+    );
+    none_left_naming(&out);
+}
+
+/// `marionette emulate` of a 10 s recording into `dir/out`, once its
+/// emulated board runs (the command and the board both name `out`: the
+/// board reads its flash region from there).
+fn emulating(dir: &Path) -> (Child, PathBuf) {
+    let (recording, _) = repeated_recording(dir, 10);
+    let out = dir.join("out");
+    let tables = rest_tables(dir);
+    let child = Command::new(env!("CARGO_BIN_EXE_marionette"))
+        .args(["emulate", "--tables", s(&tables), "--recording"])
+        .args([s(&recording), "--out", s(&out)])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while processes_naming(&out).len() < 2 {
+        assert!(Instant::now() < deadline, "no emulated board");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    (child, out)
+}
+
+/// Waits (up to 30 s) for `child` to end.
+fn ended(child: &mut Child) -> ExitStatus {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status;
+        }
+        assert!(Instant::now() < deadline, "the command did not end");
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }
 
 /// Waits (a hang guard of 120 s) until the board has put 4 KB on its
