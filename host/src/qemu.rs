@@ -224,11 +224,13 @@ pub struct Emulator {
     readers: Vec<JoinHandle<()>>,
     deadline: Instant,
     timeout: Duration,
-    _dir: tempfile::TempDir,
 }
 
 impl Emulator {
-    /// Boots QEMU and connects to its serial sockets.
+    /// Boots QEMU and connects to its serial sockets. Their folder is
+    /// removed once both are connected (a connected socket needs no path),
+    /// so that a command killed later (`kill -9`, the quit at once on a
+    /// second Ctrl-C) leaves nothing in the temporary folder.
     pub fn start(config: &Config) -> Result<Self, QemuError> {
         let qemu = check_qemu()?;
         let dir = tempfile::Builder::new()
@@ -260,7 +262,6 @@ impl Emulator {
             readers,
             deadline: Instant::now() + config.timeout,
             timeout: config.timeout,
-            _dir: dir,
         };
         if config.serial {
             let [s0, s1] = &sockets;
@@ -273,6 +274,7 @@ impl Emulator {
             emulator.servo_out = servo_out;
             emulator.tracker = Some(uart0);
         }
+        dir.close()?;
         Ok(emulator)
     }
 

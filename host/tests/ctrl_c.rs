@@ -291,6 +291,7 @@ fn a_signal_to_the_command_alone_ends_its_emulated_board_too() {
         "{stderr}"
     );
     none_left_naming(&out);
+    no_socket_folder(dir.path());
 }
 
 /// SIGKILL to the command alone: no handler runs, but the emulated board
@@ -307,29 +308,54 @@ fn sigkill_to_the_command_alone_ends_its_emulated_board_too() {
         Some(9)
     );
     none_left_naming(&out);
+    no_socket_folder(dir.path());
 }
 
-/// `marionette emulate` of a 10 s recording into `dir/out`, once its
-/// emulated board runs (the command and the board both name `out`: the
-/// board reads its flash region from there).
+/// `marionette emulate` of a 10 s recording into `dir/out`, with `dir/tmp`
+/// as its temporary folder, once its emulated board runs (the command and
+/// the board both name `out`: the board reads its flash region from there).
 fn emulating(dir: &Path) -> (Child, PathBuf) {
     let (recording, _) = repeated_recording(dir, 10);
     let out = dir.join("out");
     let tables = rest_tables(dir);
-    let child = Command::new(env!("CARGO_BIN_EXE_marionette"))
+    let tmp = dir.join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_marionette"))
         .args(["emulate", "--tables", s(&tables), "--recording"])
         .args([s(&recording), "--out", s(&out)])
+        .env("TMPDIR", &tmp)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     let deadline = Instant::now() + Duration::from_secs(120);
-    while processes_naming(&out).len() < 2 {
-        assert!(Instant::now() < deadline, "no emulated board");
+    while processes_naming(&out).len() < 2 || !socket_folders(&tmp).is_empty() {
+        let folders = socket_folders(&tmp);
+        assert!(
+            Instant::now() < deadline && child.try_wait().unwrap().is_none(),
+            "emulate ended, or ran out of time, before its board ran without a socket folder: {folders:?}"
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     (child, out)
+}
+
+/// Checks that the command left no folder of QEMU's serial sockets in its
+/// temporary folder `dir/tmp`.
+fn no_socket_folder(dir: &Path) {
+    let left = socket_folders(&dir.join("tmp"));
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+/// The folders of QEMU's serial sockets in `tmp` (`Emulator::start`
+/// removes its folder once it has connected to both).
+fn socket_folders(tmp: &Path) -> Vec<std::ffi::OsString> {
+    std::fs::read_dir(tmp)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .filter(|n| n.to_string_lossy().starts_with("marionette-qemu"))
+        .collect()
 }
 
 /// Waits (up to 30 s) for `child` to end.
