@@ -12,9 +12,26 @@
 //! named for their content (`marionette-<hash>/`, the repository's layout
 //! inside) and return the path there. A file already there with the same
 //! bytes is reused; writes go through a temporary file and a rename.
+//!
+//! Each build has its own folder, so a machine that runs many builds (a
+//! developer's) would collect one per build, 11 MB each, in a temporary
+//! folder that is often in memory. So each run stamps its folder
+//! (`.last-used`) and removes the folders of other builds unused for a day
+//! ([`STALE`]): named `marionette-` and 16 hex digits, real folders (not
+//! links) owned by this user, their stamp (or, from builds before the
+//! stamp, the folder itself) older than that. A board already running from
+//! a removed folder keeps its open files; a later run of that build writes
+//! its folder again.
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
+use std::time::{Duration, SystemTime};
+
+/// Other builds' bundle folders unused for this long are removed.
+pub const STALE: Duration = Duration::from_secs(24 * 3600);
+
+/// The file whose modification time says when a bundle folder was last used.
+const STAMP: &str = ".last-used";
 
 mod embedded {
     include!(concat!(env!("OUT_DIR"), "/bundle.rs"));
@@ -77,8 +94,13 @@ fn not_bundled(name: &str) -> std::io::Error {
 pub fn folder() -> &'static Path {
     static FOLDER: OnceLock<PathBuf> = OnceLock::new();
     FOLDER.get_or_init(|| {
-        let shared = std::env::temp_dir().join(format!("marionette-{}", embedded::HASH));
+        let tmp = std::env::temp_dir();
+        let shared = tmp.join(format!("marionette-{}", embedded::HASH));
         if ours(&shared) {
+            // Best effort: a folder that cannot be stamped or pruned still works.
+            let now = SystemTime::now();
+            let _ = std::fs::File::create(shared.join(STAMP)).and_then(|f| f.set_modified(now));
+            prune(&tmp, &shared, now);
             return shared;
         }
         tempfile::Builder::new()
@@ -103,6 +125,43 @@ fn ours(dir: &Path) -> bool {
         }
         _ => false,
     }
+}
+
+/// Removes the bundle folders in `tmp` other than `keep` that were last
+/// used more than [`STALE`] before `now` (see the module doc); owned by the
+/// owner of `keep`. Errors are ignored: another run may prune at the same
+/// time.
+fn prune(tmp: &Path, keep: &Path, now: SystemTime) {
+    use std::os::unix::fs::MetadataExt as _;
+    let (Ok(entries), Ok(mine)) = (std::fs::read_dir(tmp), std::fs::symlink_metadata(keep)) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        let stale = |p: &Path| {
+            std::fs::symlink_metadata(p)
+                .and_then(|m| m.modified())
+                .is_ok_and(|t| now.duration_since(t).is_ok_and(|age| age > STALE))
+        };
+        let is_bundle = bundle_name(&entry.file_name().to_string_lossy())
+            && path != keep
+            && std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir() && m.uid() == mine.uid());
+        let stamp = path.join(STAMP);
+        let unused = if stamp.exists() {
+            stale(&stamp)
+        } else {
+            stale(&path)
+        };
+        if is_bundle && unused {
+            let _ = std::fs::remove_dir_all(&path);
+        }
+    }
+}
+
+/// Whether `name` is a bundle folder's: `marionette-` and 16 hex digits.
+fn bundle_name(name: &str) -> bool {
+    name.strip_prefix("marionette-")
+        .is_some_and(|h| h.len() == 16 && h.bytes().all(|b| b.is_ascii_hexdigit()))
 }
 
 /// Writes `bytes` to `<folder>/rel` unless that file already holds them.
@@ -145,6 +204,62 @@ mod tests {
         ] {
             assert!(files.contains(&needed), "{needed} is bundled");
         }
+    }
+
+    /// Sets the modification time of `path` (a file or a folder).
+    fn age(path: &Path, when: SystemTime) {
+        std::fs::File::open(path)
+            .unwrap()
+            .set_modified(when)
+            .unwrap();
+    }
+
+    #[test]
+    fn other_builds_folders_unused_for_a_day_are_removed_and_nothing_else() {
+        let tmp = tempfile::tempdir().unwrap();
+        let now = SystemTime::now();
+        let day_and_more = now - STALE - Duration::from_secs(60);
+        let hour_ago = now - Duration::from_secs(3600);
+        let dir = |name: &str| {
+            let p = tmp.path().join(name);
+            std::fs::create_dir_all(p.join("firmware")).unwrap();
+            p
+        };
+        let keep = dir("marionette-0123456789abcdef");
+        age(&keep, day_and_more);
+        // Stamped long ago, and stamped within the day.
+        let old = dir("marionette-00000000000000aa");
+        std::fs::File::create(old.join(STAMP)).unwrap();
+        age(&old.join(STAMP), day_and_more);
+        let recent = dir("marionette-00000000000000bb");
+        std::fs::File::create(recent.join(STAMP)).unwrap();
+        age(&recent.join(STAMP), hour_ago);
+        age(&recent, day_and_more);
+        // From a build before the stamp: the folder's own time.
+        let unstamped = dir("marionette-00000000000000cc");
+        age(&unstamped, day_and_more);
+        let unstamped_recent = dir("marionette-00000000000000dd");
+        age(&unstamped_recent, hour_ago);
+        // Not bundle folders: other names, a file, a link to an old bundle.
+        let others = [
+            dir("marionette-qemuAbC123"),
+            dir("marionette-00000000000000e"),
+            dir("marionette-00000000000000fg"),
+            dir("something-0000000000000000"),
+        ];
+        for p in &others {
+            age(p, day_and_more);
+        }
+        let file = tmp.path().join("marionette-1111111111111111");
+        std::fs::write(&file, b"x").unwrap();
+        age(&file, day_and_more);
+        let link = tmp.path().join("marionette-2222222222222222");
+        std::os::unix::fs::symlink(&old, &link).unwrap();
+        prune(tmp.path(), &keep, now);
+        assert!(!old.exists() && !unstamped.exists());
+        assert!(keep.exists() && recent.exists() && unstamped_recent.exists());
+        assert!(others.iter().all(|p| p.exists()));
+        assert!(file.exists() && std::fs::symlink_metadata(&link).is_ok());
     }
 
     #[test]
