@@ -13,7 +13,6 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::{env, fs};
 
 include!("firmware_build.rs");
@@ -130,15 +129,10 @@ fn emulated_bins(manifest: &Path) -> Vec<String> {
 /// Builds the firmware binaries (release, panic-never) and copies the ELFs of
 /// `bins` into `OUT_DIR`, returning the copies' paths in that order.
 fn build_firmware(firmware: &Path, bins: &[String]) -> Vec<PathBuf> {
-    let cargo = env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let target_dir = firmware.join("target");
-    let mut cmd = Command::new(cargo);
-    cmd.current_dir(firmware)
-        .args(["build", "--quiet", "--release", "--bins", "--target-dir"])
+    let mut cmd = firmware_cargo(firmware);
+    cmd.args(["build", "--quiet", "--release", "--bins", "--target-dir"])
         .arg(&target_dir);
-    for var in OUTER_ENV {
-        cmd.env_remove(var);
-    }
     let status = cmd.status().expect("cargo runs");
     assert!(
         status.success(),

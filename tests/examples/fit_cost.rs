@@ -56,7 +56,6 @@ use fit::{Bump, Solve};
 use marionette_core::solve::cost::{COST, TERMS};
 use marionette_host::{icount, qemu};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 include!("../../host/firmware_build.rs");
@@ -296,17 +295,12 @@ fn write_cost(path: &Path, cost: &[u64]) -> Result<(), Error> {
 /// `target_dir` and returns its ELF.
 fn build(repo: &Path, target_dir: &Path, terms: bool) -> Result<PathBuf, Error> {
     let dir = repo.join("firmware");
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let mut cmd = Command::new(cargo);
-    cmd.current_dir(&dir)
-        .args(["build", "--quiet", "--release", "--bin", "cost"])
+    let mut cmd = firmware_cargo(&dir);
+    cmd.args(["build", "--quiet", "--release", "--bin", "cost"])
         .arg("--target-dir")
         .arg(target_dir);
     if terms {
         cmd.args(["--features", "cost-terms"]);
-    }
-    for var in OUTER_ENV {
-        cmd.env_remove(var);
     }
     let failed = |why: String| Error::Build {
         dir: dir.clone(),
