@@ -23,6 +23,7 @@ use marionette_core::crc::crc32;
 use marionette_core::frame::{NoCycles, Performer, Region, Update};
 use marionette_core::goal::{GoalSet, Target as GoalTarget};
 use marionette_core::grid::GridError;
+use marionette_core::perform::JOG_TIMEOUT_US;
 use marionette_core::pose::Pose;
 use marionette_core::rig::Rig;
 use marionette_core::servo::quarter_us;
@@ -909,9 +910,10 @@ impl Run {
         self.check(p, &update);
     }
 
-    /// The fail-safe: the link goes quiet; ticking at the frame period must
-    /// bring every servo to its rest pulse, still, within the time its
-    /// speed and acceleration limits need.
+    /// The fail-safe: the link goes quiet for the fail-safe time-out (or
+    /// the jog's, [`JOG_TIMEOUT_US`], if longer: a jog ends then); ticking
+    /// at the frame period must then bring every servo to its rest pulse,
+    /// still, within the time its speed and acceleration limits need.
     pub fn finish(&mut self, p: &mut Performer<'_, '_>) {
         let bound = self
             .limits
@@ -921,7 +923,7 @@ impl Run {
             .max()
             .unwrap_or(0)
             + 10;
-        self.now = self.now.wrapping_add(self.timeout_us);
+        self.now = self.now.wrapping_add(self.timeout_us.max(JOG_TIMEOUT_US));
         let mut ticks = 0;
         while !p.resting() {
             assert!(ticks <= bound, "not at rest after {ticks} ticks");

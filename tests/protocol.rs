@@ -565,6 +565,46 @@ fn a_jog_keeps_the_calibrated_range_and_the_slew_limits() {
     assert!(!ack(&send(&mut p, &jog(9, 1, 7000), now)), "armed");
 }
 
+/// A jog ends after a second in which the board accepted no message
+/// (`perform::JOG_TIMEOUT_US`: a host that vanished must not leave the
+/// servo held), not before; any message within the second, here the same
+/// `Jog` again, keeps it.
+#[test]
+fn a_jog_ends_after_a_second_without_a_message_from_the_host() {
+    let bytes = region();
+    let region = Region::parse(&bytes);
+    let mut solver = SolverState::new();
+    let mut p = Performer::new(&region, &mut solver);
+    let jog = |seq| {
+        command(
+            seq,
+            CommandKind::Jog {
+                channel: 1,
+                target: 7000,
+            },
+        )
+    };
+    let acked = |r: Vec<Message>| matches!(r.as_slice(), [Message::Ack(a)] if a.ok);
+    assert!(acked(send(&mut p, &jog(1), 0)));
+    let mut now = 0;
+    // 999 ms of silence: still held at 7000.
+    let held = jog_ticks(&mut p, &mut now, 1, 999);
+    assert_eq!(held[998], 7000);
+    assert!(acked(send(&mut p, &jog(2), now)));
+    let kept = jog_ticks(&mut p, &mut now, 1, 999);
+    assert!(kept.iter().all(|&t| t == 7000), "the repeated jog keeps it");
+    // The second without a message ends: back to rest within the limits.
+    let back = jog_ticks(&mut p, &mut now, 1, 400);
+    assert!(
+        back[0] < 7000,
+        "eases from the tick a second after the last message"
+    );
+    assert_within_channel_1_limits(7000, &back);
+    assert_eq!(back[399], 6000);
+    assert!(p.resting() && p.settled());
+    assert_eq!(marionette_core::perform::JOG_TIMEOUT_US, 1_000_000);
+}
+
 /// A board without a table still jogs (a servo is calibrated before its
 /// tables are built); one that cannot drive the rig's back-end does not;
 /// `Disarm` and a `Hello` end a jog.

@@ -183,6 +183,25 @@ fn calibrate_in_a_terminal_jogs_the_emulated_board_and_writes_the_rig() {
     );
 }
 
+/// A servo held where the user jogged it stays there while they look: the
+/// board ends a jog after a second without a message from the host (its
+/// watchdog), so `calibrate` repeats the jog while it waits for a key.
+#[test]
+fn a_jogged_servo_stays_while_the_user_looks() {
+    let Some((tmux, _rig, _dir)) = start(&shipped_rig()) else {
+        return;
+    };
+    tmux.wait_for(&["commanded 1500 µs"]);
+    tmux.keys(&["k", "k"]);
+    tmux.wait_for(&["commanded 1700 µs, on the servo link 1700 µs"]);
+    // Three times the board's watchdog without a key.
+    std::thread::sleep(Duration::from_secs(3));
+    tmux.keys(&["c"]);
+    tmux.wait_for(&["centre 1700 µs", "on the servo link 1700 µs"]);
+    tmux.keys(&["q"]);
+    tmux.wait_for(&["on the servo link 1500 µs", "EXIT=0"]);
+}
+
 /// The processes whose parent is `pid` (from `/proc/*/stat`).
 fn children_of(pid: u32) -> Vec<u32> {
     std::fs::read_dir("/proc")

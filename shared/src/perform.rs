@@ -50,8 +50,12 @@
 //! speed and acceleration limits**. Every other servo eases to, or stays
 //! at, rest. Further `Jog`s to the same channel move its target; `Jog`
 //! with target 0, `Disarm` or any `Hello` end the jog: the channel eases
-//! back to rest and is the loop's again. `Arm` is refused while a jog is
-//! under way, including its easing back.
+//! back to rest and is the loop's again. So does a second without any
+//! message from the host ([`JOG_TIMEOUT_US`]): a host that vanished
+//! mid-jog must not leave a servo held, perhaps stalled against its end
+//! stop, so a host holding a jog repeats it (or sends any message) more
+//! often than that. `Arm` is refused while a jog is under way, including
+//! its easing back.
 //!
 //! ## Shows
 //!
@@ -104,6 +108,11 @@ use crate::wire::{
 
 /// A telemetry message goes out after every this many performed frames.
 pub const TELEMETRY_EVERY: u32 = 10;
+
+/// A calibration jog ends (its channel eases back to rest) once the board
+/// has accepted no message for this long, µs (see
+/// [Calibration jog](self#calibration-jog)).
+pub const JOG_TIMEOUT_US: u32 = 1_000_000;
 
 /// The frame period and fail-safe time-out of a board without a rig, µs.
 const IDLE_PERIOD_US: u32 = 1000;
@@ -280,6 +289,8 @@ pub struct Performer<'r, 'a, const N: usize = MAX_SEGMENTS> {
     period_us: u32,
     timeout_us: u32,
     last_frame_us: u32,
+    /// When the last message was accepted (the jog's watchdog).
+    last_heard_us: u32,
     /// In the fail-safe state: the ticks of the current trip so far.
     trip_ticks: Option<u32>,
     trips: u32,
@@ -327,6 +338,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             period_us,
             timeout_us: timeout_ms.saturating_mul(1000),
             last_frame_us: 0,
+            last_heard_us: 0,
             trip_ticks: None,
             trips: 0,
             last_trip: Trip::default(),
@@ -566,6 +578,7 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
             return Update::NONE;
         };
         let decoded = cycles.now();
+        self.last_heard_us = now_us;
         match incoming {
             Incoming::Hello { accepted, .. } => {
                 if !accepted {
@@ -609,6 +622,10 @@ impl<'r, 'a, const N: usize> Performer<'r, 'a, N> {
         let Some(pipeline) = &mut self.pipeline else {
             return Update::NONE;
         };
+        let silent = now_us.wrapping_sub(self.last_heard_us) >= JOG_TIMEOUT_US;
+        if silent && pipeline.jogging() {
+            pipeline.end_jog();
+        }
         if lost || !self.armed {
             pipeline.drop_correction();
             if pipeline.rest_step() {

@@ -12,7 +12,9 @@
 //! datasheet's range) and narrow it to where the figure's mechanism allows.
 //! The screen shows the pulse (a bus servo's position) commanded and, on the
 //! emulated board, the one its servo link actually carries (decoded from
-//! UART1).
+//! UART1). While it waits, the tool repeats the jog every [`KEEP_ALIVE`]:
+//! a board that hears nothing for a second ends the jog and eases the
+//! servo back to rest (a host that crashed must not leave it held).
 //!
 //! | key | does |
 //! |---|---|
@@ -46,6 +48,7 @@ use marionette_core::wire::{
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use toml_edit::{DocumentMut, Item, Value};
@@ -68,6 +71,12 @@ pub struct Args {
     #[arg(long, default_value_t = 921_600)]
     pub baud: u32,
 }
+
+/// How often a held jog is repeated while `calibrate` waits (for a key, or
+/// for the servo to arrive): well within the board's jog watchdog
+/// ([`marionette_core::perform::JOG_TIMEOUT_US`], a second), which ends a
+/// jog whose host has gone quiet.
+const KEEP_ALIVE: Duration = Duration::from_millis(250);
 
 /// A board to jog.
 trait Link {
@@ -191,6 +200,8 @@ struct Session<'l> {
     /// Reply bytes after the last frame delimiter.
     reply_bytes: Vec<u8>,
     seq: u32,
+    /// When the last command went out, if a jog is held (not ended).
+    holding: Option<Instant>,
     found: Found,
     message: String,
 }
@@ -215,12 +226,35 @@ impl Session<'_> {
                 "at the rig's limit ({lo:.0}..{hi:.0}): widen it in the rig file to go further"
             );
         }
-        let target = quarter_us(self.value);
+        self.hold()
+    }
+
+    /// Sends the jog to the commanded value (again), holding it.
+    fn hold(&mut self) -> Result<(), CmdError> {
         self.command(CommandKind::Jog {
             channel: self.channel,
-            target,
+            target: quarter_us(self.value),
+        })?;
+        self.holding = Some(Instant::now());
+        Ok(())
+    }
+
+    /// Ends the jog: the servo eases back to rest, and is no longer held.
+    fn release(&mut self) -> Result<(), CmdError> {
+        self.holding = None;
+        self.command(CommandKind::Jog {
+            channel: self.channel,
+            target: 0,
         })?;
         Ok(())
+    }
+
+    /// Repeats a held jog once [`KEEP_ALIVE`] has passed since the last.
+    fn keep_alive(&mut self) -> Result<(), CmdError> {
+        match self.holding {
+            Some(sent) if sent.elapsed() >= KEEP_ALIVE => self.hold(),
+            _ => Ok(()),
+        }
     }
 
     /// Takes what the board sent: Acks (a refused jog is shown), and the
@@ -269,6 +303,7 @@ impl Session<'_> {
         let until = Instant::now() + wait;
         let mut shown = String::new();
         loop {
+            self.keep_alive()?;
             self.poll();
             let screen = self.screen(rig);
             if screen != shown {
@@ -383,9 +418,9 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
     if !term.is_term() {
         return Err("calibrate is interactive: run it in a terminal".into());
     }
-    // Ctrl-C between keys (while the screen settles) quits as `q` does;
-    // the emulated board runs out of the terminal's Ctrl-C, ended by this
-    // process ([`crate::interrupt`]).
+    // A signal (SIGTERM, SIGHUP; Ctrl-C while the screen settles) quits as
+    // `q` does; the emulated board runs out of the terminal's Ctrl-C, ended
+    // by this process ([`crate::interrupt`]).
     let stop = crate::interrupt::stop_on_ctrl_c("calibrate")?;
     let rig_blob = rigfile::to_blob(&rig)?;
     let region = perform::region(&rig_blob, None);
@@ -420,28 +455,65 @@ pub fn run(args: &Args) -> Result<(), CmdError> {
         servo_bytes: Vec::new(),
         reply_bytes: Vec::new(),
         seq: 0,
+        holding: None,
         found: Found::default(),
         message: String::new(),
     };
     let name = rig.name().to_string();
     s.jog(servo.rest_us)?;
     s.settle(&term, &name, Duration::from_secs(2))?;
+    let saved = terminal_mode();
     let outcome = keys(&term, &mut s, (&path, &servo, &name), stop);
     // Back to rest; Disarm also ends the emulated board's session.
     s.message = "back to rest".into();
     s.value = servo.rest_us;
-    let _ = s.command(CommandKind::Jog {
-        channel: args.channel,
-        target: 0,
-    });
+    let _ = s.release();
     let _ = s.settle(&term, &name, Duration::from_secs(3));
     let _ = s.command(CommandKind::Disarm);
+    restore_terminal(saved);
     let _ = term.write_line("");
     outcome
 }
 
+/// The terminal's mode, to restore at the end: the key reader may still be
+/// waiting for a key (in raw mode) when a signal ends the session.
+fn terminal_mode() -> Option<nix::sys::termios::Termios> {
+    nix::sys::termios::tcgetattr(std::io::stdin()).ok()
+}
+
+/// Puts the terminal back in `saved` mode.
+fn restore_terminal(saved: Option<nix::sys::termios::Termios>) {
+    if let Some(mode) = saved {
+        let now = nix::sys::termios::SetArg::TCSANOW;
+        let _ = nix::sys::termios::tcsetattr(std::io::stdin(), now, &mode);
+    }
+}
+
+/// Reads keys on a thread of its own, so that the session can repeat its
+/// jog while no key comes. The thread ends after a key that quits.
+fn key_reader() -> mpsc::Receiver<std::io::Result<Key>> {
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let term = Term::stdout();
+        loop {
+            let key = term.read_key_raw();
+            let last = key.as_ref().map_or(true, quits);
+            if tx.send(key).is_err() || last {
+                return;
+            }
+        }
+    });
+    rx
+}
+
+/// Whether `key` ends the session: `q`, Escape or Ctrl-C.
+fn quits(key: &Key) -> bool {
+    matches!(key, Key::Char('q') | Key::Escape | Key::CtrlC)
+}
+
 /// The key loop, until `q`, Escape or Ctrl-C (a key in the terminal's raw
-/// mode, or a signal that set `stop` while the screen settled).
+/// mode, or a signal that set `stop`), repeating the held jog while no key
+/// comes ([`KEEP_ALIVE`]).
 fn keys(
     term: &Term,
     s: &mut Session<'_>,
@@ -449,8 +521,20 @@ fn keys(
     stop: &AtomicBool,
 ) -> Result<(), CmdError> {
     let (small, big) = if s.bus { (5.0, 50.0) } else { (10.0, 100.0) };
+    let keys = key_reader();
     while !stop.load(Ordering::Relaxed) {
-        let key = term.read_key_raw()?;
+        let key = match keys.recv_timeout(KEEP_ALIVE / 5) {
+            Ok(key) => key?,
+            Err(RecvTimeoutError::Timeout) => {
+                // Repeats the held jog; shows what the servo link carries.
+                s.settle(term, rig, Duration::ZERO)?;
+                continue;
+            }
+            Err(RecvTimeoutError::Disconnected) => return Ok(()),
+        };
+        if quits(&key) {
+            return Ok(());
+        }
         s.message.clear();
         let step = match key {
             Key::ArrowLeft | Key::Char('h') => Some(-small),
@@ -476,7 +560,6 @@ fn keys(
                 };
                 None
             }
-            Key::Char('q') | Key::Escape | Key::CtrlC => return Ok(()),
             _ => None,
         };
         if let Some(step) = step {

@@ -165,6 +165,9 @@ pub enum CommandKind {
     /// channel within its calibrated range and its slew limits, refuses the
     /// jog while armed or while another channel jogs, and refuses `Arm`
     /// while a jog is under way (see [`crate::perform`], Calibration jog).
+    /// A jog also ends after a second without any message from the host
+    /// ([`crate::perform::JOG_TIMEOUT_US`]): a host holding a servo where it
+    /// is repeats this command (or sends any message) more often.
     Jog {
         /// Servo channel, `< MAX_SERVOS`.
         channel: u8,

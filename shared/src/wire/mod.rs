@@ -132,7 +132,13 @@
 //! `ok: false` while armed, when it cannot drive the rig (no rig,
 //! `Unsupported`), for a channel the rig has no servo on, or while another
 //! channel is jogging. `Jog` target 0, `Disarm` or a `Hello` end the jog
-//! (the servo eases back to rest); `Arm` is refused until it is back.
+//! (the servo eases back to rest); `Arm` is refused until it is back. So
+//! does a second in which the board accepts no message at all
+//! ([`crate::perform::JOG_TIMEOUT_US`], 1,000,000 µs of the board's clock):
+//! a host that vanished mid-jog does not leave a servo held, perhaps
+//! stalled against its end stop. A host that holds a jog while its user
+//! looks repeats the `Jog` (same target) or sends any other message more
+//! often than that (`marionette calibrate`: every 250 ms).
 //! Behaviour in detail: [`crate::perform`].
 //!
 //! `Jog { channel: 1, target: 6000 }` (1500 µs) with `seq` 5: payload
