@@ -12,7 +12,7 @@
 //! datasheet's range) and narrow it to where the figure's mechanism allows.
 //! The screen shows the pulse (a bus servo's position) commanded and, on the
 //! emulated board, the one its servo link actually carries (decoded from
-//! UART1). While it waits, the tool repeats the jog every [`KEEP_ALIVE`]:
+//! UART1). While it waits, the tool repeats the jog every 250 ms:
 //! a board that hears nothing for a second ends the jog and eases the
 //! servo back to rest (a host that crashed must not leave it held).
 //!
