@@ -136,23 +136,21 @@ fn prune(tmp: &Path, keep: &Path, now: SystemTime) {
     let (Ok(entries), Ok(mine)) = (std::fs::read_dir(tmp), std::fs::symlink_metadata(keep)) else {
         return;
     };
+    let stale = |p: &Path| {
+        std::fs::symlink_metadata(p)
+            .and_then(|m| m.modified())
+            .is_ok_and(|t| now.duration_since(t).is_ok_and(|age| age > STALE))
+    };
     for entry in entries.flatten() {
         let path = entry.path();
-        let stale = |p: &Path| {
-            std::fs::symlink_metadata(p)
-                .and_then(|m| m.modified())
-                .is_ok_and(|t| now.duration_since(t).is_ok_and(|age| age > STALE))
-        };
-        let is_bundle = bundle_name(&entry.file_name().to_string_lossy())
-            && path != keep
-            && std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir() && m.uid() == mine.uid());
+        if !bundle_name(&entry.file_name().to_string_lossy()) || path == keep {
+            continue;
+        }
+        let ours =
+            std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir() && m.uid() == mine.uid());
         let stamp = path.join(STAMP);
-        let unused = if stamp.exists() {
-            stale(&stamp)
-        } else {
-            stale(&path)
-        };
-        if is_bundle && unused {
+        let last_used = if stamp.exists() { &stamp } else { &path };
+        if ours && stale(last_used) {
             let _ = std::fs::remove_dir_all(&path);
         }
     }
